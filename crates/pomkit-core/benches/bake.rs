@@ -1,0 +1,39 @@
+//! Baking a 4096x4096 normal map, next to a plain copy of the same bytes.
+//!
+//! The copy reads the height field's 64 MiB of f32 depths and writes them to a second buffer;
+//! the bake reads the same depths and writes 48 MiB of RGB8 normals. Run with
+//! `cargo bench -p pomkit-core --bench bake`; figures go in docs/BENCHMARKS.md.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals_into, encode_rgb8};
+use pomkit_core::procedural::{Pattern, generate};
+use std::hint::black_box;
+
+fn bench_bake(c: &mut Criterion) {
+    let size = 4096;
+    let field = generate(Pattern::Cobblestones, size, size);
+    let texels = field.depths().len();
+    let mut group = c.benchmark_group("bake_4096");
+    group.sample_size(10);
+    let mut copy = vec![0.0f32; texels];
+    group.bench_function("memcpy_f32_depths", |b| {
+        b.iter(|| {
+            copy.copy_from_slice(black_box(field.depths()));
+            black_box(&copy);
+        });
+    });
+    let mut out = vec![[0u8; 3]; texels];
+    for filter in [NormalFilter::Central, NormalFilter::Sobel] {
+        let opts = NormalBakeOptions { filter, ..Default::default() };
+        group.bench_function(format!("normal_rgb8_{filter:?}").to_lowercase(), |b| {
+            b.iter(|| {
+                bake_normals_into(black_box(&field), &opts, &mut out, encode_rgb8, &|_| {}).expect("valid options");
+                black_box(&out);
+            });
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_bake);
+criterion_main!(benches);

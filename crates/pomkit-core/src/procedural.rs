@@ -1,0 +1,854 @@
+//! Procedural height maps and matching albedo (colour) maps.
+//!
+//! Every pattern is a function of the texel centre's UV, `u = (x + 0.5) / w`, `v = (y + 0.5) / h`
+//! (DESIGN section 2: `(0, 0)` is the top-left corner, `v` runs down the rows). All patterns
+//! except [`Pattern::Text`] and [`Pattern::Spike`] are periodic in `u` and `v` with period 1, so
+//! they tile seamlessly at any size, powers of two or not: the texel after the last column
+//! continues the first one. Randomness comes from an integer hash of cell indices taken modulo
+//! the tile's cell count, so the output is deterministic and the same on every machine.
+//!
+//! Heights follow the art-tool convention: 1 (white) is the surface top, 0 the deepest point.
+//! [`generate`] turns them into a [`HeightField`], which stores depth `1 - h`.
+
+use std::f32::consts::{PI, TAU};
+use std::fmt;
+use std::str::FromStr;
+use std::sync::LazyLock;
+
+use rayon::prelude::*;
+
+use crate::heightfield::HeightField;
+
+/// A built-in procedural height map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Pattern {
+    /// Running-bond brick wall: 4 courses of 2 bricks per tile, alternate courses shifted by half
+    /// a brick. Flat brick faces near 1 (each brick lowered by up to 0.06 by a hash, plus a
+    /// grain of 0.015) with quarter-round edges over 0.018 tile units; mortar joints
+    /// 0.024 tile units wide, recessed to 0.3 (plus a grain of 0.02).
+    Bricks,
+    /// A 4x4 grid of square pyramids per tile: `h = 1 - 2 max(|fu - 1/2|, |fv - 1/2|)` where
+    /// `(fu, fv)` is the position inside a pyramid's cell, so the apex is 1, the base 0 and each
+    /// face is a plane of slope 8 per tile.
+    Pyramids,
+    /// Rounded stones: Voronoi cells over a jittered 6x6 grid per tile, each raised as a dome
+    /// (a quarter-circle profile of the smoothed distance to the cell border) to a top between
+    /// 0.82 and 1; the gaps between stones are low (0.08 to 0.16).
+    Cobblestones,
+    /// Raised lettering: the word POMKIT in two lines ("POM" over "KIT") of a built-in 5x7
+    /// bitmap font drawn as round-capped strokes, letters at 1 with smooth bevelled edges, on a
+    /// flat plate at 0.35. Reads normally with row 0 at the top. Tiles too, as the plate's
+    /// margin is flat.
+    Text,
+    /// Flat at 0 except one texel of height 1: the texel `(w / 2, h / 2)` (integer division),
+    /// the one nearest the centre. Tests that a tracer never misses a one-texel feature.
+    Spike,
+    /// A smooth analytic field, see [`waves_height`]:
+    /// `h = 1/2 + 1/2 sin(2 pi k u) cos(2 pi k v)` with `k` = [`WAVES_PERIODS`].
+    Waves,
+}
+
+impl Pattern {
+    /// Every pattern, in declaration order.
+    pub const ALL: [Pattern; 6] =
+        [Pattern::Bricks, Pattern::Pyramids, Pattern::Cobblestones, Pattern::Text, Pattern::Spike, Pattern::Waves];
+
+    /// The lowercase name used on the command line and in scene files (`"bricks"`, ...).
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Pattern::Bricks => "bricks",
+            Pattern::Pyramids => "pyramids",
+            Pattern::Cobblestones => "cobblestones",
+            Pattern::Text => "text",
+            Pattern::Spike => "spike",
+            Pattern::Waves => "waves",
+        }
+    }
+}
+
+impl fmt::Display for Pattern {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The name given to [`Pattern::from_str`] is not a known pattern.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown pattern {name:?}: expected one of {}", valid_names())]
+pub struct UnknownPattern {
+    /// The name that was given.
+    pub name: String,
+}
+
+/// `"bricks, pyramids, ..."`, for error messages.
+fn valid_names() -> String {
+    Pattern::ALL.map(Pattern::name).join(", ")
+}
+
+impl FromStr for Pattern {
+    type Err = UnknownPattern;
+
+    /// Parses a pattern name, ignoring ASCII case and surrounding white space.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let trimmed = s.trim();
+        Pattern::ALL
+            .into_iter()
+            .find(|p| p.name().eq_ignore_ascii_case(trimmed))
+            .ok_or_else(|| UnknownPattern { name: s.to_owned() })
+    }
+}
+
+/// Builds the height map of `pattern` at `width` x `height` texels (a size of 0 is treated as 1).
+///
+/// Deterministic: the same arguments always give the same field.
+#[must_use]
+pub fn generate(pattern: Pattern, width: u32, height: u32) -> HeightField {
+    let (w, h) = (width.max(1), height.max(1));
+    let heights = per_texel(w, h, |x, y| match pattern {
+        Pattern::Spike => spike_height(x, y, w, h),
+        _ => {
+            let (u, v) = texel_uv(x, y, w, h);
+            match pattern {
+                Pattern::Bricks => bricks(u, v).height,
+                Pattern::Pyramids => pyramid_height(u, v),
+                Pattern::Cobblestones => cobbles(u, v).height,
+                Pattern::Text => text(u, v).height,
+                Pattern::Waves => waves_height(u, v),
+                Pattern::Spike => unreachable!("handled above"),
+            }
+        }
+    });
+    HeightField::from_height_fn(w, h, |x, y| heights[y as usize * w as usize + x as usize])
+}
+
+/// A colour map matching [`generate`]'s height map: `width * height` sRGB texels, row-major,
+/// top row first (a size of 0 is treated as 1).
+///
+/// Bricks are red-brown with a per-brick tint in grey mortar, pyramids sandstone with faint
+/// strata, cobblestones grey to brown per stone on dark soil, text brass letters on a slate
+/// plate, waves deep to pale blue by height, and the spike an orange texel on light grey.
+#[must_use]
+pub fn albedo(pattern: Pattern, width: u32, height: u32) -> Vec<[u8; 3]> {
+    let (w, h) = (width.max(1), height.max(1));
+    per_texel(w, h, |x, y| {
+        let (u, v) = texel_uv(x, y, w, h);
+        let rgb = match pattern {
+            Pattern::Bricks => bricks_albedo(u, v),
+            Pattern::Pyramids => pyramid_albedo(u, v),
+            Pattern::Cobblestones => cobbles_albedo(u, v),
+            Pattern::Text => text_albedo(u, v),
+            Pattern::Spike => {
+                if spike_height(x, y, w, h) > 0.5 {
+                    [0.93, 0.42, 0.13]
+                } else {
+                    [0.74, 0.74, 0.72]
+                }
+            }
+            Pattern::Waves => {
+                let t = waves_height(u, v);
+                mix([0.12, 0.3, 0.5], [0.7, 0.85, 0.9], t)
+            }
+        };
+        rgb.map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)
+    })
+}
+
+/// Evaluates `f(x, y)` at every texel, rows in parallel; row-major result.
+fn per_texel<T: Send + Copy + Default>(w: u32, h: u32, f: impl Fn(u32, u32) -> T + Sync) -> Vec<T> {
+    let mut out = vec![T::default(); w as usize * h as usize];
+    out.par_chunks_mut(w as usize).enumerate().for_each(|(y, row)| {
+        for (x, texel) in row.iter_mut().enumerate() {
+            *texel = f(x as u32, y as u32);
+        }
+    });
+    out
+}
+
+/// UV of the centre of texel `(x, y)`.
+fn texel_uv(x: u32, y: u32, w: u32, h: u32) -> (f32, f32) {
+    ((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shared helpers: hashing, periodic value noise, blending.
+// ---------------------------------------------------------------------------------------------
+
+/// Mixes three integers into 32 well-scrambled bits (a 64-bit multiply-xorshift finalizer).
+fn hash3(a: u32, b: u32, c: u32) -> u32 {
+    let mut x = u64::from(a) | (u64::from(b) << 32);
+    x ^= u64::from(c).wrapping_add(0x632b_e59b_d9b4_e019).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    x = (x ^ (x >> 31)).wrapping_mul(0xd6e8_feb8_6659_fd93);
+    x = (x ^ (x >> 29)).wrapping_mul(0xa076_1d64_78bd_642f);
+    (x ^ (x >> 32)) as u32
+}
+
+/// A hash in `[0, 1)`.
+fn hash01(a: u32, b: u32, c: u32) -> f32 {
+    (hash3(a, b, c) >> 8) as f32 / (1u32 << 24) as f32
+}
+
+/// `i` wrapped into `0..n` (any sign), as the index of a periodic lattice.
+fn wrap_index(i: f32, n: u32) -> u32 {
+    (i as i64).rem_euclid(i64::from(n)) as u32
+}
+
+/// Hermite smoothstep of `t` clamped to `[0, 1]`.
+fn smoothstep(t: f32) -> f32 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Value noise in `[0, 1]` over a lattice of `period` x `period` cells per tile: periodic in `u`
+/// and `v` with period 1, smooth (quintic fade) between lattice values.
+fn value_noise(u: f32, v: f32, period: u32, seed: u32) -> f32 {
+    let (x, y) = (u * period as f32, v * period as f32);
+    let (x0, y0) = (x.floor(), y.floor());
+    let fade = |t: f32| t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
+    let (sx, sy) = (fade(x - x0), fade(y - y0));
+    let corner = |dx: f32, dy: f32| hash01(wrap_index(x0 + dx, period), wrap_index(y0 + dy, period), seed);
+    let top = corner(0.0, 0.0) + (corner(1.0, 0.0) - corner(0.0, 0.0)) * sx;
+    let bottom = corner(0.0, 1.0) + (corner(1.0, 1.0) - corner(0.0, 1.0)) * sx;
+    top + (bottom - top) * sy
+}
+
+/// Two octaves of [`value_noise`] (base `period` and twice it), in `[0, 1]`.
+fn fbm(u: f32, v: f32, period: u32, seed: u32) -> f32 {
+    (2.0 * value_noise(u, v, period, seed) + value_noise(u, v, 2 * period, seed ^ 0x5bd1)) / 3.0
+}
+
+/// Linear blend of two colours.
+fn mix(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
+    [0, 1, 2].map(|i| a[i] + (b[i] - a[i]) * t)
+}
+
+/// A colour scaled by `k`.
+fn scale(c: [f32; 3], k: f32) -> [f32; 3] {
+    c.map(|x| x * k)
+}
+
+/// A rounded edge profile on `[0, 1]`: a quarter circle, vertical at 0 and flat at 1.
+fn quarter_round(t: f32) -> f32 {
+    let s = 1.0 - t.clamp(0.0, 1.0);
+    (1.0 - s * s).max(0.0).sqrt()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bricks.
+// ---------------------------------------------------------------------------------------------
+
+/// Brick courses (rows) per tile.
+const BRICK_COURSES: u32 = 4;
+/// Bricks per course per tile.
+const BRICKS_PER_COURSE: u32 = 2;
+/// Half the width of a mortar joint, in tile units.
+const MORTAR_HALF_WIDTH: f32 = 0.012;
+/// Width of the rounded brick edge, in tile units.
+const BRICK_BEVEL: f32 = 0.018;
+/// Height of the mortar.
+const MORTAR_HEIGHT: f32 = 0.3;
+
+/// What a point of the brick wall is.
+struct BrickSample {
+    height: f32,
+    /// Distance inside the brick face from the joint, in tile units; <= 0 in the mortar.
+    inset: f32,
+    /// Hash of the brick (course and index within the course, both wrapped).
+    id: u32,
+}
+
+/// Bricks: in course `r = floor(4 v)` the brick coordinate is `s = 2 u + (r odd ? 1/2 : 0)`.
+/// The inset is the distance (tile units) to the brick's nearest side minus half a joint; the
+/// face height is `top(brick) - 0.015 grain`, dropping to the mortar over a quarter-round edge
+/// of width 0.018.
+fn bricks(u: f32, v: f32) -> BrickSample {
+    let t = v * BRICK_COURSES as f32;
+    let course = t.floor();
+    let fy = t - course;
+    let shift = if wrap_index(course, 2) == 1 { 0.5 } else { 0.0 };
+    let s = u * BRICKS_PER_COURSE as f32 + shift;
+    let column = s.floor();
+    let fx = s - column;
+    let id = hash3(wrap_index(course, BRICK_COURSES), wrap_index(column, BRICKS_PER_COURSE), 1);
+    let dx = fx.min(1.0 - fx) / BRICKS_PER_COURSE as f32;
+    let dy = fy.min(1.0 - fy) / BRICK_COURSES as f32;
+    let inset = dx.min(dy) - MORTAR_HALF_WIDTH;
+    let mortar = MORTAR_HEIGHT + 0.02 * (value_noise(u, v, 48, 2) - 0.5);
+    let height = if inset <= 0.0 {
+        mortar
+    } else {
+        let top = 1.0 - 0.06 * hash01(id, 0, 3) - 0.015 * fbm(u, v, 12, 4);
+        mortar + (top - mortar) * quarter_round(inset / BRICK_BEVEL)
+    };
+    BrickSample { height, inset, id }
+}
+
+fn bricks_albedo(u: f32, v: f32) -> [f32; 3] {
+    let b = bricks(u, v);
+    let grain = value_noise(u, v, 64, 7);
+    if b.inset <= 0.0 {
+        return scale([0.66, 0.64, 0.6], 0.9 + 0.2 * grain);
+    }
+    let tint = hash01(b.id, 1, 5);
+    let base = if tint < 0.5 {
+        mix([0.53, 0.21, 0.15], [0.6, 0.26, 0.18], tint * 2.0)
+    } else {
+        mix([0.6, 0.26, 0.18], [0.66, 0.33, 0.21], tint * 2.0 - 1.0)
+    };
+    let blotch = fbm(u, v, 16, 8);
+    scale(base, 0.88 + 0.12 * hash01(b.id, 2, 6) + 0.1 * blotch + 0.08 * grain)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pyramids.
+// ---------------------------------------------------------------------------------------------
+
+/// Pyramids per tile along each axis.
+const PYRAMIDS_PER_TILE: f32 = 4.0;
+
+/// `h = 1 - 2 max(|fu - 1/2|, |fv - 1/2|)`, `(fu, fv)` = fractional part of `4 (u, v)`.
+fn pyramid_height(u: f32, v: f32) -> f32 {
+    let fu = (u * PYRAMIDS_PER_TILE).rem_euclid(1.0);
+    let fv = (v * PYRAMIDS_PER_TILE).rem_euclid(1.0);
+    1.0 - 2.0 * (fu - 0.5).abs().max((fv - 0.5).abs())
+}
+
+fn pyramid_albedo(u: f32, v: f32) -> [f32; 3] {
+    let h = pyramid_height(u, v);
+    // Faint horizontal courses of stone: a dark line every 1/8 of the height.
+    let band = ((h * 8.0).fract() - 0.5).abs() * 2.0;
+    let line = smoothstep((band - 0.8) / 0.12);
+    let sand = fbm(u, v, 24, 11);
+    let base = mix([0.8, 0.66, 0.46], [0.87, 0.76, 0.56], sand);
+    scale(base, 0.97 - 0.2 * line + 0.05 * value_noise(u, v, 96, 12))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cobblestones.
+// ---------------------------------------------------------------------------------------------
+
+/// Voronoi cells per tile along each axis.
+const COBBLE_CELLS: u32 = 6;
+/// Half the gap between stones, in cell units.
+const COBBLE_GAP: f32 = 0.045;
+/// Width of the dome's rounded flank, in cell units.
+const COBBLE_ROUND: f32 = 0.32;
+/// Sharpness of the soft minimum that rounds the ridges of a cell's distance field.
+const COBBLE_SOFTNESS: f32 = 14.0;
+
+/// What a point of the cobbled surface is.
+struct CobbleSample {
+    height: f32,
+    /// The dome profile in `[0, 1]`: 0 in the gaps, 1 on a stone's top.
+    dome: f32,
+    /// Hash of the stone's (wrapped) cell.
+    id: u32,
+}
+
+/// The feature point of lattice cell `(i, j)` (any integers; hashed modulo the tile), in cell
+/// units: jittered within the middle 60 % of the cell.
+fn cobble_point(i: f32, j: f32) -> (f32, f32, u32) {
+    let id = hash3(wrap_index(i, COBBLE_CELLS), wrap_index(j, COBBLE_CELLS), 21);
+    let jx = hash01(id, 0, 22);
+    let jy = hash01(id, 1, 23);
+    (i + 0.2 + 0.6 * jx, j + 0.2 + 0.6 * jy, id)
+}
+
+/// Cobbles: `p = 6 (u, v)`; the nearest feature point `a` picks the stone. The border distance
+/// `e` is a soft minimum (log-sum-exp, sharpness 14) over the other points `b` of the distance
+/// from `p` to the bisector of `a` and `b`; the dome is `quarter_round((e - 0.045) / 0.32)` and
+/// `h = gap + (top - gap) dome`, `top` in `[0.82, 1]` per stone less a grain of 0.03.
+fn cobbles(u: f32, v: f32) -> CobbleSample {
+    let (px, py) = (u * COBBLE_CELLS as f32, v * COBBLE_CELLS as f32);
+    let (cx, cy) = (px.floor(), py.floor());
+    let mut points = [(0.0f32, 0.0f32, 0u32); 25];
+    let mut nearest = 0;
+    let mut nearest_d2 = f32::INFINITY;
+    for (k, point) in points.iter_mut().enumerate() {
+        let (di, dj) = ((k % 5) as f32 - 2.0, (k / 5) as f32 - 2.0);
+        *point = cobble_point(cx + di, cy + dj);
+        let d2 = (point.0 - px).powi(2) + (point.1 - py).powi(2);
+        if d2 < nearest_d2 {
+            nearest_d2 = d2;
+            nearest = k;
+        }
+    }
+    let (ax, ay, id) = points[nearest];
+    let mut sum = 0.0f32;
+    for (k, &(bx, by, _)) in points.iter().enumerate() {
+        if k == nearest {
+            continue;
+        }
+        let (nx, ny) = (bx - ax, by - ay);
+        let len = (nx * nx + ny * ny).sqrt();
+        if len < 1e-6 {
+            continue;
+        }
+        let (mx, my) = (0.5 * (ax + bx), 0.5 * (ay + by));
+        let d = ((mx - px) * nx + (my - py) * ny) / len;
+        sum += (-COBBLE_SOFTNESS * d).exp();
+    }
+    let border = if sum > 0.0 { -sum.ln() / COBBLE_SOFTNESS } else { 1.0 };
+    let dome = quarter_round((border - COBBLE_GAP) / COBBLE_ROUND) * f32::from(border > COBBLE_GAP);
+    let gap = 0.08 + 0.08 * fbm(u, v, 24, 24);
+    let top = 0.85 + 0.15 * hash01(id, 2, 25) - 0.03 * fbm(u, v, 20, 26);
+    CobbleSample { height: gap + (top - gap) * dome, dome, id }
+}
+
+fn cobbles_albedo(u: f32, v: f32) -> [f32; 3] {
+    let c = cobbles(u, v);
+    let grain = value_noise(u, v, 80, 31);
+    let soil = scale([0.3, 0.26, 0.21], 0.85 + 0.3 * grain);
+    let hue = hash01(c.id, 3, 32);
+    let stone = mix([0.52, 0.51, 0.49], [0.58, 0.47, 0.36], hue);
+    let stone = scale(stone, 0.78 + 0.3 * hash01(c.id, 4, 33) + 0.12 * fbm(u, v, 24, 34));
+    mix(soil, stone, smoothstep(c.dome * 4.0))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Text.
+// ---------------------------------------------------------------------------------------------
+
+/// The lines of text, top to bottom.
+const TEXT_LINES: [&str; 2] = ["POM", "KIT"];
+/// Empty font pixels around the text block.
+const TEXT_MARGIN: u32 = 2;
+/// Height of the plate the letters stand on.
+const PLATE_HEIGHT: f32 = 0.35;
+/// Width of a letter's bevel, in font pixels, centred on the letter's outline.
+const TEXT_BEVEL: f32 = 0.5;
+/// Half the width of a letter stroke, in font pixels.
+const STROKE_HALF_WIDTH: f32 = 0.5;
+
+/// Glyphs of the built-in 5x7 font: seven rows, top first; bit 4 is the leftmost column.
+/// Unknown characters are blank.
+const fn glyph(c: char) -> [u8; 7] {
+    match c {
+        'A' => [0b01110, 0b10001, 0b10001, 0b11111, 0b10001, 0b10001, 0b10001],
+        'E' => [0b11111, 0b10000, 0b10000, 0b11110, 0b10000, 0b10000, 0b11111],
+        'I' => [0b01110, 0b00100, 0b00100, 0b00100, 0b00100, 0b00100, 0b01110],
+        'K' => [0b10001, 0b10010, 0b10100, 0b11000, 0b10100, 0b10010, 0b10001],
+        'L' => [0b10000, 0b10000, 0b10000, 0b10000, 0b10000, 0b10000, 0b11111],
+        'M' => [0b10001, 0b11011, 0b10101, 0b10101, 0b10001, 0b10001, 0b10001],
+        'O' => [0b01110, 0b10001, 0b10001, 0b10001, 0b10001, 0b10001, 0b01110],
+        'P' => [0b11110, 0b10001, 0b10001, 0b11110, 0b10000, 0b10000, 0b10000],
+        'T' => [0b11111, 0b00100, 0b00100, 0b00100, 0b00100, 0b00100, 0b00100],
+        'X' => [0b10001, 0b10001, 0b01010, 0b00100, 0b01010, 0b10001, 0b10001],
+        _ => [0; 7],
+    }
+}
+
+/// Columns of the text layout in font pixels: margins plus the longest line (5 per glyph and 1
+/// between glyphs).
+fn text_columns() -> u32 {
+    let longest = TEXT_LINES.iter().map(|l| l.chars().count() as u32).max().unwrap_or(0);
+    2 * TEXT_MARGIN + (6 * longest).saturating_sub(1)
+}
+
+/// Rows of the text layout in font pixels: margins plus 7 per line and 2 between lines.
+fn text_rows() -> u32 {
+    2 * TEXT_MARGIN + (9 * TEXT_LINES.len() as u32).saturating_sub(2)
+}
+
+/// Whether font pixel `(col, row)` of the layout (row 0 at the top) is part of a letter.
+fn text_lit(col: i64, row: i64) -> bool {
+    let (col, row) = (col - i64::from(TEXT_MARGIN), row - i64::from(TEXT_MARGIN));
+    if col < 0 || row < 0 {
+        return false;
+    }
+    let (line, glyph_row) = ((row / 9) as usize, (row % 9) as usize);
+    let (index, glyph_col) = ((col / 6) as usize, (col % 6) as u32);
+    if glyph_row >= 7 || glyph_col >= 5 {
+        return false;
+    }
+    let Some(c) = TEXT_LINES.get(line).and_then(|l| l.chars().nth(index)) else {
+        return false;
+    };
+    glyph(c)[glyph_row] & (0b10000 >> glyph_col) != 0
+}
+
+/// Distance from `(px, py)` to the segment `[ax, ay, bx, by]`.
+fn segment_distance(px: f32, py: f32, s: [f32; 4]) -> f32 {
+    let (dx, dy) = (s[2] - s[0], s[3] - s[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 { (((px - s[0]) * dx + (py - s[1]) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let (ex, ey) = (px - s[0] - t * dx, py - s[1] - t * dy);
+    (ex * ex + ey * ey).sqrt()
+}
+
+/// The text block turned into strokes, built once: the bitmap's lit pixels become round-capped
+/// strokes between the centres of neighbouring lit pixels, so that letters have rounded
+/// corners and diagonals (K, M) are solid strokes rather than pixels touching at corners.
+struct TextLayout {
+    cols: u32,
+    rows: u32,
+    /// Stroke centre lines `[ax, ay, bx, by]` in font pixels (a point for a lone pixel).
+    strokes: Vec<[f32; 4]>,
+    /// For each font pixel, row-major, the strokes close enough to shape it.
+    near: Vec<Vec<u16>>,
+}
+
+/// Built on first use.
+static TEXT_LAYOUT: LazyLock<TextLayout> = LazyLock::new(TextLayout::new);
+
+impl TextLayout {
+    fn new() -> Self {
+        let (cols, rows) = (text_columns(), text_rows());
+        let mut strokes = Vec::new();
+        for r in 0..i64::from(rows) {
+            for c in 0..i64::from(cols) {
+                if !text_lit(c, r) {
+                    continue;
+                }
+                let (ax, ay) = (c as f32 + 0.5, r as f32 + 0.5);
+                strokes.push([ax, ay, ax, ay]);
+                for (dc, dr) in [(1, 0), (0, 1), (1, 1), (-1, 1)] {
+                    if !text_lit(c + dc, r + dr) {
+                        continue;
+                    }
+                    // A diagonal joins two pixels only where nothing else does: if an
+                    // orthogonal neighbour already links them, it would fill the inner corner.
+                    if dc != 0 && dr != 0 && (text_lit(c + dc, r) || text_lit(c, r + dr)) {
+                        continue;
+                    }
+                    strokes.push([ax, ay, ax + dc as f32, ay + dr as f32]);
+                }
+            }
+        }
+        // A stroke shapes the points within its half-width plus half the bevel.
+        let reach = STROKE_HALF_WIDTH + 0.5 * TEXT_BEVEL + 0.01;
+        let mut near = vec![Vec::new(); cols as usize * rows as usize];
+        for (k, s) in strokes.iter().enumerate() {
+            let (x0, x1) = (s[0].min(s[2]) - reach, s[0].max(s[2]) + reach);
+            let (y0, y1) = (s[1].min(s[3]) - reach, s[1].max(s[3]) + reach);
+            for r in (y0.floor().max(0.0) as u32)..(y1.ceil().min(rows as f32) as u32) {
+                for c in (x0.floor().max(0.0) as u32)..(x1.ceil().min(cols as f32) as u32) {
+                    near[(r * cols + c) as usize].push(k as u16);
+                }
+            }
+        }
+        Self { cols, rows, strokes, near }
+    }
+
+    /// Signed distance (font pixels) from layout point `(px, py)` to the letters' outline,
+    /// negative inside; capped at the reach of a stroke outside.
+    fn signed_distance(&self, px: f32, py: f32) -> f32 {
+        let c = wrap_index(px.floor(), self.cols);
+        let r = wrap_index(py.floor(), self.rows);
+        let (px, py) = (px.rem_euclid(self.cols as f32), py.rem_euclid(self.rows as f32));
+        self.near[(r * self.cols + c) as usize]
+            .iter()
+            .map(|&k| segment_distance(px, py, self.strokes[usize::from(k)]) - STROKE_HALF_WIDTH)
+            .fold(1.0, f32::min)
+    }
+}
+
+/// What a point of the text plate is.
+struct TextSample {
+    height: f32,
+    /// How far the point is raised towards a letter top, in `[0, 1]`.
+    raise: f32,
+}
+
+/// Text: `p = (u, v) * (columns, rows)` in font pixels (21 x 20). Each lit pixel of the 5x7
+/// glyphs is joined to its lit neighbours by a stroke of half-width 1/2; `sd` is the signed
+/// distance from `p` to the union of strokes (negative inside); the letter rises as
+/// `raise = smoothstep(1/2 - sd / 0.5)` and `h = 0.35 + 0.65 raise`.
+fn text(u: f32, v: f32) -> TextSample {
+    let layout = &*TEXT_LAYOUT;
+    let sd = layout.signed_distance(u * layout.cols as f32, v * layout.rows as f32);
+    let raise = smoothstep(0.5 - sd / TEXT_BEVEL);
+    TextSample { height: PLATE_HEIGHT + (1.0 - PLATE_HEIGHT) * raise, raise }
+}
+
+fn text_albedo(u: f32, v: f32) -> [f32; 3] {
+    let t = text(u, v);
+    let grain = fbm(u, v, 32, 41);
+    let plate = scale([0.2, 0.24, 0.3], 0.9 + 0.2 * grain);
+    let brass = scale([0.87, 0.7, 0.33], 0.92 + 0.12 * grain);
+    mix(plate, brass, t.raise)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Spike.
+// ---------------------------------------------------------------------------------------------
+
+/// 1 at texel `(w / 2, h / 2)`, 0 elsewhere.
+fn spike_height(x: u32, y: u32, w: u32, h: u32) -> f32 {
+    f32::from(x == w / 2 && y == h / 2)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Waves.
+// ---------------------------------------------------------------------------------------------
+
+/// Periods of [`Pattern::Waves`] per tile along each axis (`k` in [`waves_height`]).
+pub const WAVES_PERIODS: u32 = 2;
+
+/// The analytic height of [`Pattern::Waves`] at `(u, v)`:
+/// `h(u, v) = 1/2 + 1/2 sin(2 pi k u) cos(2 pi k v)` with `k` = [`WAVES_PERIODS`].
+///
+/// [`generate`] samples it at texel centres `((x + 0.5) / w, (y + 0.5) / h)`. Periodic with
+/// period 1 in `u` and `v`; the range is `[0, 1]`.
+#[must_use]
+pub fn waves_height(u: f32, v: f32) -> f32 {
+    let k = WAVES_PERIODS as f32;
+    0.5 + 0.5 * (TAU * k * u).sin() * (TAU * k * v).cos()
+}
+
+/// The analytic gradient `(dh/du, dh/dv)` of [`waves_height`], per UV unit:
+/// `(pi k cos(2 pi k u) cos(2 pi k v), -pi k sin(2 pi k u) sin(2 pi k v))`.
+///
+/// Divide by the size in texels to get the change per texel.
+#[must_use]
+pub fn waves_gradient(u: f32, v: f32) -> (f32, f32) {
+    let k = WAVES_PERIODS as f32;
+    let (su, cu) = (TAU * k * u).sin_cos();
+    let (sv, cv) = (TAU * k * v).sin_cos();
+    (PI * k * cu * cv, -PI * k * su * sv)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::heightfield::EdgeMode;
+
+    fn heights(p: Pattern, w: u32, h: u32) -> Vec<f32> {
+        let hf = generate(p, w, h);
+        assert_eq!((hf.width(), hf.height()), (w.max(1), h.max(1)));
+        hf.heights()
+    }
+
+    /// Largest jump across the wrap seam and largest jump between interior neighbours, along
+    /// x (`along_y = false`) or y, plus the means of both.
+    fn seam_stats(hf: &HeightField, along_y: bool) -> (f32, f32, f32, f32) {
+        let (w, h) = (i64::from(hf.width()), i64::from(hf.height()));
+        let (n, m) = if along_y { (h, w) } else { (w, h) };
+        let at = |i: i64, j: i64| {
+            if along_y { hf.height_at(j, i, EdgeMode::Clamp) } else { hf.height_at(i, j, EdgeMode::Clamp) }
+        };
+        let (mut edge_max, mut edge_sum, mut inner_max, mut inner_sum) = (0.0f32, 0.0, 0.0f32, 0.0);
+        for j in 0..m {
+            let e = (at(n - 1, j) - at(0, j)).abs();
+            edge_max = edge_max.max(e);
+            edge_sum += e;
+            for i in 0..n - 1 {
+                let d = (at(i + 1, j) - at(i, j)).abs();
+                inner_max = inner_max.max(d);
+                inner_sum += d;
+            }
+        }
+        (edge_max, edge_sum / m as f32, inner_max, inner_sum / (m * (n - 1)) as f32)
+    }
+
+    /// The seam may be a little steeper than any interior pair (waves put their steepest point
+    /// exactly on it), but not more than 10 % steeper, and not steeper on average than a few
+    /// times the mean interior step.
+    fn is_seamless(hf: &HeightField) -> bool {
+        [false, true].into_iter().all(|along_y| {
+            let (edge_max, edge_mean, inner_max, inner_mean) = seam_stats(hf, along_y);
+            edge_max <= 1.1 * inner_max + 1e-6 && edge_mean <= 2.5 * inner_mean + 1e-6
+        })
+    }
+
+    #[test]
+    fn names_round_trip_and_errors_list_the_choices() {
+        for p in Pattern::ALL {
+            assert_eq!(p.name().parse::<Pattern>(), Ok(p));
+            assert_eq!(p.to_string(), p.name());
+            assert_eq!(p.name(), p.name().to_lowercase());
+        }
+        assert_eq!(" Bricks ".parse::<Pattern>(), Ok(Pattern::Bricks));
+        let err = "marble".parse::<Pattern>().unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains("marble"), "{msg}");
+        for p in Pattern::ALL {
+            assert!(msg.contains(p.name()), "{msg}");
+        }
+    }
+
+    #[test]
+    fn heights_are_finite_and_in_range_at_any_size() {
+        for p in Pattern::ALL {
+            for (w, h) in [(37, 23), (1, 1), (0, 0), (2, 3), (64, 64)] {
+                let hs = heights(p, w, h);
+                assert_eq!(hs.len(), (w.max(1) * h.max(1)) as usize);
+                for (k, &v) in hs.iter().enumerate() {
+                    assert!(v.is_finite() && (0.0..=1.0).contains(&v), "{p} {w}x{h} texel {k}: {v}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn patterns_are_deterministic_and_not_constant() {
+        for p in Pattern::ALL {
+            let a = heights(p, 40, 30);
+            assert_eq!(a, heights(p, 40, 30), "{p}");
+            let (lo, hi) = a.iter().fold((1.0f32, 0.0f32), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            assert!(hi - lo > 0.5, "{p}: range {lo}..{hi}");
+        }
+    }
+
+    #[test]
+    fn tiling_patterns_are_seamless_at_odd_and_even_sizes() {
+        // The check itself must reject a field that does not tile.
+        let ramp = HeightField::from_height_fn(50, 40, |x, _| x as f32 / 49.0);
+        assert!(!is_seamless(&ramp));
+        let half_pyramids = HeightField::from_height_fn(64, 64, |x, y| {
+            pyramid_height((x as f32 + 0.5) / 64.0 * 0.875, (y as f32 + 0.5) / 64.0 * 0.875)
+        });
+        assert!(!is_seamless(&half_pyramids));
+        for p in [Pattern::Bricks, Pattern::Pyramids, Pattern::Cobblestones, Pattern::Waves, Pattern::Text] {
+            for (w, h) in [(256, 256), (37, 23), (100, 60)] {
+                let hf = generate(p, w, h);
+                for along_y in [false, true] {
+                    let stats = seam_stats(&hf, along_y);
+                    assert!(is_seamless(&hf), "{p} {w}x{h} along_y={along_y}: {stats:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn pyramids_have_apex_base_and_linear_faces() {
+        let (w, h) = (256u32, 256u32);
+        let hf = generate(Pattern::Pyramids, w, h);
+        let at = |x: i64, y: i64| hf.height_at(x, y, EdgeMode::Clamp);
+        // Cells are 64 texels: the apex lies between texels 31 and 32, the base corner between
+        // texels 63 and 64 (and at the tile corner).
+        assert!(at(31, 31) > 0.98 && at(32, 32) > 0.98, "{}", at(31, 31));
+        assert!(at(0, 0) < 0.02 && at(63, 64) < 0.02 && at(255, 255) < 0.02, "{}", at(0, 0));
+        // Along the row through the apex the height changes by 2 * 4 / w per texel, rising up to
+        // the apex and falling after it.
+        let slope = 2.0 * PYRAMIDS_PER_TILE / w as f32;
+        for x in 1..30 {
+            assert!((at(x + 1, 31) - at(x, 31) - slope).abs() < 1e-4, "x = {x}");
+            assert!((at(x + 33, 31) - at(x + 32, 31) + slope).abs() < 1e-4, "x = {}", x + 32);
+        }
+        // Every texel matches the formula at an odd size too.
+        let hf = generate(Pattern::Pyramids, 37, 23);
+        for y in 0..23 {
+            for x in 0..37 {
+                let (u, v) = ((x as f32 + 0.5) / 37.0, (y as f32 + 0.5) / 23.0);
+                let (fu, fv) = ((4.0 * u).fract(), (4.0 * v).fract());
+                let expect = 1.0 - 2.0 * (fu - 0.5).abs().max((fv - 0.5).abs());
+                assert!((hf.height_at(x, y, EdgeMode::Clamp) - expect).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn spike_is_one_texel_nearest_the_centre() {
+        for (w, h) in [(256, 256), (37, 23), (1, 1), (2, 5)] {
+            let hs = heights(Pattern::Spike, w, h);
+            let ones: Vec<usize> = (0..hs.len()).filter(|&k| hs[k] == 1.0).collect();
+            assert_eq!(ones, vec![(h / 2 * w + w / 2) as usize], "{w}x{h}");
+            assert_eq!(hs.iter().filter(|&&v| v == 0.0).count(), hs.len() - 1, "{w}x{h}");
+        }
+    }
+
+    #[test]
+    fn text_has_letters_on_a_plate_reading_left_to_right() {
+        let (w, h) = (256u32, 256u32);
+        let hs = heights(Pattern::Text, w, h);
+        let n = hs.len() as f32;
+        let letters = hs.iter().filter(|&&v| v > 0.9).count() as f32 / n;
+        let plate = hs.iter().filter(|&&v| (v - PLATE_HEIGHT).abs() < 0.01).count() as f32 / n;
+        assert!((0.1..=0.4).contains(&letters), "letters {letters}");
+        assert!(plate > 0.4, "plate {plate}");
+        // The layout is 21 x 20 font pixels; the P occupies columns 2..7, rows 2..9.
+        let (cols, rows) = (text_columns() as f32, text_rows() as f32);
+        assert_eq!((cols, rows), (21.0, 20.0));
+        let at_pixel = |col: f32, row: f32| {
+            let x = ((col + 0.5) / cols * w as f32) as usize;
+            let y = ((row + 0.5) / rows * h as f32) as usize;
+            hs[y * w as usize + x]
+        };
+        // P's stem (column 0) on every row; its bowl closes on the right (column 4) at rows 1-2
+        // but not at rows 4-6: the glyph is neither mirrored nor upside down.
+        for row in 0..7 {
+            assert!(at_pixel(2.0, 2.0 + row as f32) > 0.99, "stem row {row}");
+        }
+        for row in [1.0, 2.0] {
+            assert!(at_pixel(6.0, 2.0 + row) > 0.99, "bowl row {row}");
+        }
+        for row in [4.0, 5.0, 6.0] {
+            assert!((at_pixel(6.0, 2.0 + row) - PLATE_HEIGHT).abs() < 0.01, "row {row}");
+        }
+        // The left half holds the P; the plate margin is flat.
+        assert!(hs.iter().enumerate().any(|(k, &v)| (k % w as usize) < 128 && v > 0.99));
+        assert!((0..w as usize).all(|x| (hs[x] - PLATE_HEIGHT).abs() < 1e-6));
+        // T's bar spans its top row, its stem only the middle column.
+        assert!(at_pixel(14.0, 11.0) > 0.99 && at_pixel(18.0, 11.0) > 0.99);
+        assert!((at_pixel(14.0, 15.0) - PLATE_HEIGHT).abs() < 0.01 && at_pixel(16.0, 15.0) > 0.99);
+    }
+
+    #[test]
+    fn bricks_have_recessed_mortar_and_high_faces() {
+        let hs = heights(Pattern::Bricks, 256, 256);
+        let n = hs.len() as f32;
+        let mortar = hs.iter().filter(|&&v| v < 0.35).count() as f32 / n;
+        let faces = hs.iter().filter(|&&v| v > 0.9).count() as f32 / n;
+        assert!((0.08..=0.3).contains(&mortar), "mortar {mortar}");
+        assert!(faces > 0.6, "faces {faces}");
+        assert!(hs.iter().all(|&v| v >= 0.28));
+        // Alternate courses are offset by half a brick: the vertical joint at u = 0 cuts the
+        // first course but not the second, the one at u = 1/4 the second but not the first.
+        let course_mid = |c: usize| (c * 64 + 32) * 256;
+        assert!(hs[course_mid(0)] < 0.35 && hs[course_mid(1)] > 0.9);
+        assert!(hs[course_mid(0) + 64] > 0.9 && hs[course_mid(1) + 64] < 0.35);
+    }
+
+    #[test]
+    fn cobbles_have_low_gaps_and_raised_stones() {
+        let hs = heights(Pattern::Cobblestones, 256, 256);
+        let n = hs.len() as f32;
+        let gaps = hs.iter().filter(|&&v| v < 0.2).count() as f32 / n;
+        let tops = hs.iter().filter(|&&v| v > 0.75).count() as f32 / n;
+        assert!((0.05..=0.35).contains(&gaps), "gaps {gaps}");
+        assert!(tops > 0.3, "tops {tops}");
+    }
+
+    #[test]
+    fn waves_match_the_documented_formula_and_gradient() {
+        let (w, h) = (48u32, 36u32);
+        let hf = generate(Pattern::Waves, w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let (u, v) = texel_uv(x, y, w, h);
+                let k = WAVES_PERIODS as f32;
+                let expect = 0.5 + 0.5 * (2.0 * PI * k * u).sin() * (2.0 * PI * k * v).cos();
+                assert!((hf.height_at(x.into(), y.into(), EdgeMode::Wrap) - expect).abs() < 1e-5);
+            }
+        }
+        let e = 1e-3f32;
+        for (u, v) in [(0.1, 0.2), (0.37, 0.81), (0.5, 0.05), (0.93, 0.66)] {
+            let (gu, gv) = waves_gradient(u, v);
+            let fu = (waves_height(u + e, v) - waves_height(u - e, v)) / (2.0 * e);
+            let fv = (waves_height(u, v + e) - waves_height(u, v - e)) / (2.0 * e);
+            assert!((gu - fu).abs() < 2e-2 && (gv - fv).abs() < 2e-2, "({u}, {v})");
+        }
+        assert!((waves_gradient(0.0, 0.0).0 - PI * 2.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn albedo_has_one_texel_per_height_and_contrast() {
+        for p in Pattern::ALL {
+            for (w, h) in [(37, 23), (1, 1), (0, 3), (64, 64)] {
+                assert_eq!(albedo(p, w, h).len(), (w.max(1) * h.max(1)) as usize, "{p}");
+            }
+            let a = albedo(p, 64, 64);
+            assert_eq!(a, albedo(p, 64, 64));
+            let luma: Vec<u32> = a.iter().map(|c| u32::from(c[0]) + u32::from(c[1]) + u32::from(c[2])).collect();
+            let (lo, hi) = (luma.iter().min().unwrap(), luma.iter().max().unwrap());
+            assert!(hi - lo > 30, "{p}: flat albedo");
+        }
+        // Bricks are red, the mortar grey.
+        let a = albedo(Pattern::Bricks, 256, 256);
+        let face = a[(32 * 256) + 64];
+        assert!(face[0] > face[1] + 40 && face[0] > face[2] + 40, "{face:?}");
+        let joint = a[(64 * 256) + 64];
+        assert!(joint[0].abs_diff(joint[2]) < 30, "{joint:?}");
+    }
+}

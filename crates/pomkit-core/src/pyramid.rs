@@ -1,0 +1,200 @@
+//! The maximum-height (minimum-depth) pyramid: a quadtree of conservative depth bounds.
+//!
+//! Level 0 has one cell per texel, covering that texel's footprint in UV,
+//! `[i / w, (i + 1) / w] x [j / h, (j + 1) / h]`. Its value is the *least depth* (the greatest
+//! height) that the bilinear surface reaches anywhere inside the footprint. Each coarser level
+//! halves the cell count (rounding up, so any size works) and keeps the minimum of its up to
+//! four children. So every cell bounds the exact surface inside it: a ray that stays shallower
+//! than a cell's value cannot hit anything in that cell. The exact tracer walks this tree.
+//!
+//! Why the bound is tight: a texel footprint straddles four bilinear patches (the squares
+//! between texel centres), a quarter of each. A bilinear function restricted to an axis-aligned
+//! rectangle inside one patch is monotone along each axis, so its extremes lie at the
+//! rectangle's corners. The corners of the four quarters are the texel centre, the four edge
+//! midpoints and the four footprint corners: the minimum of those nine values is exactly the
+//! minimum depth of the surface over the footprint (not merely a bound).
+
+use crate::heightfield::{EdgeMode, HeightField};
+
+/// One level of the pyramid.
+#[derive(Clone, Debug, PartialEq)]
+struct Level {
+    width: u32,
+    height: u32,
+    min_depth: Vec<f32>,
+}
+
+/// Minimum-depth bounds over texel footprints and their quadtree ancestors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MaxHeightPyramid {
+    edges: EdgeMode,
+    base_width: u32,
+    base_height: u32,
+    levels: Vec<Level>,
+}
+
+impl MaxHeightPyramid {
+    /// Builds the pyramid of `field` for the given edge mode (which decides the neighbours of
+    /// border texels, exactly as bilinear sampling with that mode does).
+    #[must_use]
+    pub fn new(field: &HeightField, edges: EdgeMode) -> Self {
+        let (w, h) = (field.width(), field.height());
+        let mut base = Vec::with_capacity(w as usize * h as usize);
+        for y in 0..i64::from(h) {
+            for x in 0..i64::from(w) {
+                let d = |dx: i64, dy: i64| field.depth_at(x + dx, y + dy, edges);
+                let c = d(0, 0);
+                let (l, r, u, b) = (d(-1, 0), d(1, 0), d(0, -1), d(0, 1));
+                let (ul, ur, bl, br) = (d(-1, -1), d(1, -1), d(-1, 1), d(1, 1));
+                // Edge midpoints and footprint corners of the bilinear surface.
+                let mids = [(c + l) * 0.5, (c + r) * 0.5, (c + u) * 0.5, (c + b) * 0.5];
+                let corners = [
+                    (c + l + u + ul) * 0.25,
+                    (c + r + u + ur) * 0.25,
+                    (c + l + b + bl) * 0.25,
+                    (c + r + b + br) * 0.25,
+                ];
+                let m = mids.into_iter().chain(corners).fold(c, f32::min);
+                base.push(m);
+            }
+        }
+        let mut levels = vec![Level { width: w, height: h, min_depth: base }];
+        while let Some(last) = levels.last().filter(|l| l.width > 1 || l.height > 1) {
+            let (nw, nh) = (last.width.div_ceil(2), last.height.div_ceil(2));
+            let mut next = Vec::with_capacity(nw as usize * nh as usize);
+            for y in 0..nh {
+                for x in 0..nw {
+                    let mut m = f32::INFINITY;
+                    for (cx, cy) in [(2 * x, 2 * y), (2 * x + 1, 2 * y), (2 * x, 2 * y + 1), (2 * x + 1, 2 * y + 1)] {
+                        if cx < last.width && cy < last.height {
+                            m = m.min(last.min_depth[(cy * last.width + cx) as usize]);
+                        }
+                    }
+                    next.push(m);
+                }
+            }
+            levels.push(Level { width: nw, height: nh, min_depth: next });
+        }
+        Self { edges, base_width: w, base_height: h, levels }
+    }
+
+    /// Number of levels; the last one is a single cell bounding the whole field.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Always false: a pyramid has at least one level.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.levels.is_empty()
+    }
+
+    /// The edge mode the bounds were built for.
+    #[must_use]
+    pub fn edges(&self) -> EdgeMode {
+        self.edges
+    }
+
+    /// Cells `(columns, rows)` at `level`.
+    ///
+    /// # Panics
+    /// If `level >= self.len()`.
+    #[must_use]
+    pub fn level_size(&self, level: usize) -> (u32, u32) {
+        let l = &self.levels[level];
+        (l.width, l.height)
+    }
+
+    /// Least depth of the bilinear surface inside cell `(x, y)` of `level`.
+    ///
+    /// # Panics
+    /// If the level or cell is out of range.
+    #[inline]
+    #[must_use]
+    pub fn min_depth(&self, level: usize, x: u32, y: u32) -> f32 {
+        let l = &self.levels[level];
+        assert!(x < l.width && y < l.height, "cell ({x}, {y}) outside level {level} ({}x{})", l.width, l.height);
+        l.min_depth[(y * l.width + x) as usize]
+    }
+
+    /// The range of level-0 texels `[x0, x1) x [y0, y1)` covered by cell `(x, y)` of `level`
+    /// (the last row and column may be cut short on sizes that are not powers of two).
+    #[must_use]
+    pub fn cell_texels(&self, level: usize, x: u32, y: u32) -> ([u32; 2], [u32; 2]) {
+        let s = 1u32 << level.min(31);
+        let x0 = x.saturating_mul(s).min(self.base_width);
+        let y0 = y.saturating_mul(s).min(self.base_height);
+        let x1 = (x.saturating_add(1)).saturating_mul(s).min(self.base_width);
+        let y1 = (y.saturating_add(1)).saturating_mul(s).min(self.base_height);
+        ([x0, x1], [y0, y1])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec2;
+
+    fn noisy(w: u32, h: u32, seed: u32) -> HeightField {
+        HeightField::from_height_fn(w, h, |x, y| {
+            let mut k = x.wrapping_mul(374_761_393) ^ y.wrapping_mul(668_265_263) ^ seed.wrapping_mul(2_246_822_519);
+            k = (k ^ (k >> 13)).wrapping_mul(1_274_126_177);
+            (k >> 8) as f32 / (1u32 << 24) as f32
+        })
+    }
+
+    /// Independent truth: sample the bilinear surface densely (including the footprint's
+    /// corners and edge midpoints) and take the minimum.
+    fn brute_min_depth(f: &HeightField, edges: EdgeMode, x0: u32, x1: u32, y0: u32, y1: u32) -> f32 {
+        let n = 8;
+        let mut m = f32::INFINITY;
+        for ty in y0 * n..=y1 * n {
+            for tx in x0 * n..=x1 * n {
+                let uv = Vec2::new(tx as f32 / n as f32 / f.width() as f32, ty as f32 / n as f32 / f.height() as f32);
+                m = m.min(f.sample_bilinear(uv, edges));
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn every_cell_bounds_the_surface_tightly() {
+        for (w, h, edges) in [(8, 8, EdgeMode::Wrap), (7, 5, EdgeMode::Clamp), (5, 9, EdgeMode::Wrap), (1, 3, EdgeMode::Clamp)] {
+            let f = noisy(w, h, w * 31 + h);
+            let p = MaxHeightPyramid::new(&f, edges);
+            for level in 0..p.len() {
+                let (cw, ch) = p.level_size(level);
+                for y in 0..ch {
+                    for x in 0..cw {
+                        let ([x0, x1], [y0, y1]) = p.cell_texels(level, x, y);
+                        let truth = brute_min_depth(&f, edges, x0, x1, y0, y1);
+                        let bound = p.min_depth(level, x, y);
+                        assert!(bound <= truth + 1e-6, "{w}x{h} {edges:?} level {level} cell ({x},{y}): {bound} > {truth}");
+                        assert!((bound - truth).abs() < 1e-5, "bound not tight: {bound} vs {truth}");
+                    }
+                }
+            }
+            let top = p.len() - 1;
+            assert_eq!(p.level_size(top), (1, 1));
+        }
+    }
+
+    #[test]
+    fn wrap_and_clamp_differ_at_the_border() {
+        // A deep left column next to a shallow right column: with wrap the left footprint sees
+        // the right column's shallow values, with clamp it does not.
+        let f = HeightField::from_depths(3, 1, vec![1.0, 1.0, 0.0]).unwrap();
+        assert_eq!(MaxHeightPyramid::new(&f, EdgeMode::Wrap).min_depth(0, 0, 0), 0.5);
+        assert_eq!(MaxHeightPyramid::new(&f, EdgeMode::Clamp).min_depth(0, 0, 0), 1.0);
+    }
+
+    #[test]
+    fn cell_texels_cover_non_power_of_two_sizes() {
+        let p = MaxHeightPyramid::new(&HeightField::constant(5, 3, 0.5), EdgeMode::Wrap);
+        assert_eq!(p.level_size(1), (3, 2));
+        assert_eq!(p.cell_texels(1, 2, 1), ([4, 5], [2, 3]));
+        assert_eq!(p.level_size(p.len() - 1), (1, 1));
+        assert_eq!(p.cell_texels(p.len() - 1, 0, 0), ([0, 5], [0, 3]));
+    }
+}
