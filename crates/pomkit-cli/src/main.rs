@@ -1,1 +1,150 @@
-fn main() {}
+//! `pomkit`: the command line. Thin: every verb parses its flags, calls pomkit-core and
+//! pomkit-io, and reports. The flag names and formats are stable (DESIGN section 5).
+
+mod bake;
+mod progress;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use pomkit_core::HeightField;
+use pomkit_core::procedural::{self, Pattern};
+use pomkit_io::{Channel, HeightLoadOptions, PixelLayout, Pixels};
+
+/// Parallax occlusion mapping toolkit: bake maps from height maps, trace, compare and render.
+#[derive(Parser, Debug)]
+#[command(name = "pomkit", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    verb: Verb,
+}
+
+#[derive(Subcommand, Debug)]
+enum Verb {
+    /// Bake normal, parallax or packed maps from a height map.
+    #[command(subcommand)]
+    Bake(bake::BakeVerb),
+    /// Write one of the built-in procedural height maps (and optionally its colour map).
+    Generate(GenerateArgs),
+}
+
+/// Where a height map comes from and how to read it: shared by every verb that reads one.
+#[derive(Args, Debug, Clone)]
+struct HeightInput {
+    /// Height map: an image file (PNG, JPEG, TIFF, EXR; 8/16-bit or float), or `builtin:NAME`
+    /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves), optionally
+    /// sized as `builtin:NAME:WxH` (default 512x512).
+    #[arg(value_name = "IN")]
+    input: String,
+    /// The image stores depth (white = deep) instead of height (white = high).
+    #[arg(long)]
+    depth_map: bool,
+    /// Channel holding the height: r, g, b, a (e.g. a normal map with height in alpha) or luma
+    /// (Rec. 709 weights; the grey value of a grey image).
+    #[arg(long, value_enum, default_value_t = ChannelArg::Luma)]
+    channel: ChannelArg,
+    /// Rescale values so the lowest becomes 0 and the highest 1 (for float maps in world units).
+    #[arg(long)]
+    normalize: bool,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum ChannelArg {
+    R,
+    G,
+    B,
+    A,
+    Luma,
+}
+
+impl From<ChannelArg> for Channel {
+    fn from(c: ChannelArg) -> Self {
+        match c {
+            ChannelArg::R => Channel::R,
+            ChannelArg::G => Channel::G,
+            ChannelArg::B => Channel::B,
+            ChannelArg::A => Channel::A,
+            ChannelArg::Luma => Channel::Luma,
+        }
+    }
+}
+
+impl HeightInput {
+    /// Loads the height field this input names.
+    fn load(&self) -> Result<HeightField> {
+        if let Some(spec) = self.input.strip_prefix("builtin:") {
+            let (name, size) = spec.split_once(':').unwrap_or((spec, "512x512"));
+            let pattern: Pattern = name.parse().with_context(|| format!("input {}", self.input))?;
+            let (w, h) = parse_size(size).with_context(|| format!("input {}", self.input))?;
+            let field = procedural::generate(pattern, w, h);
+            return Ok(if self.depth_map {
+                // The builtin is a height map; read as depth it is inverted, as a file would be.
+                HeightField::from_depths(w, h, field.heights()).context("inverting builtin")?
+            } else {
+                field
+            });
+        }
+        let opts = HeightLoadOptions { depth_map: self.depth_map, channel: self.channel.into(), normalize: self.normalize };
+        Ok(pomkit_io::load_height_field(&PathBuf::from(&self.input), &opts)?)
+    }
+}
+
+/// Parses `WxH` with both sides in 1..=16384.
+fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s.split_once(['x', 'X']).with_context(|| format!("size '{s}' is not WxH, e.g. 512x512"))?;
+    let parse = |v: &str| -> Result<u32> {
+        let n: u32 = v.trim().parse().with_context(|| format!("size '{s}': '{v}' is not a whole number"))?;
+        if !(1..=16384).contains(&n) {
+            bail!("size '{s}': each side must be between 1 and 16384");
+        }
+        Ok(n)
+    };
+    Ok((parse(w)?, parse(h)?))
+}
+
+#[derive(Args, Debug)]
+struct GenerateArgs {
+    /// bricks, pyramids, cobblestones, text, spike or waves.
+    pattern: String,
+    /// Output height map (16-bit grey PNG, white = high).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Size in texels.
+    #[arg(long, default_value = "512x512")]
+    size: String,
+    /// Also write the matching colour map (RGB8 PNG) here.
+    #[arg(long)]
+    albedo: Option<PathBuf>,
+}
+
+fn generate(args: &GenerateArgs) -> Result<()> {
+    let pattern: Pattern = args.pattern.parse()?;
+    let (w, h) = parse_size(&args.size)?;
+    let field = procedural::generate(pattern, w, h);
+    let samples: Vec<u16> = field.heights().iter().map(|&v| (v * 65535.0).round() as u16).collect();
+    pomkit_io::write_image(&args.output, w, h, PixelLayout::Gray16, Pixels::U16(&samples))?;
+    eprintln!("wrote {} ({w}x{h} height map, {})", args.output.display(), pattern.name());
+    if let Some(path) = &args.albedo {
+        let rgb: Vec<u8> = procedural::albedo(pattern, w, h).into_iter().flatten().collect();
+        pomkit_io::write_image(path, w, h, PixelLayout::Rgb8, Pixels::U8(&rgb))?;
+        eprintln!("wrote {} (colour map)", path.display());
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.verb {
+        Verb::Bake(verb) => bake::run(verb),
+        Verb::Generate(args) => generate(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,11 +1,12 @@
 //! Procedural height maps and matching albedo (colour) maps.
 //!
 //! Every pattern is a function of the texel centre's UV, `u = (x + 0.5) / w`, `v = (y + 0.5) / h`
-//! (DESIGN section 2: `(0, 0)` is the top-left corner, `v` runs down the rows). All patterns
-//! except [`Pattern::Text`] and [`Pattern::Spike`] are periodic in `u` and `v` with period 1, so
-//! they tile seamlessly at any size, powers of two or not: the texel after the last column
-//! continues the first one. Randomness comes from an integer hash of cell indices taken modulo
-//! the tile's cell count, so the output is deterministic and the same on every machine.
+//! (DESIGN section 2: `(0, 0)` is the top-left corner, `v` runs down the rows). Bricks,
+//! pyramids, cobblestones and waves are periodic in `u` and `v` with period 1, so they tile
+//! seamlessly at any size, powers of two or not: the texel after the last column continues the
+//! first one. Text and spike are not periodic but are flat along the border, so they tile too.
+//! Randomness comes from an integer hash of cell indices taken modulo the tile's cell count, so
+//! the output is deterministic and the same on every machine.
 //!
 //! Heights follow the art-tool convention: 1 (white) is the surface top, 0 the deepest point.
 //! [`generate`] turns them into a [`HeightField`], which stores depth `1 - h`.
@@ -105,18 +106,15 @@ impl FromStr for Pattern {
 #[must_use]
 pub fn generate(pattern: Pattern, width: u32, height: u32) -> HeightField {
     let (w, h) = (width.max(1), height.max(1));
-    let heights = per_texel(w, h, |x, y| match pattern {
-        Pattern::Spike => spike_height(x, y, w, h),
-        _ => {
-            let (u, v) = texel_uv(x, y, w, h);
-            match pattern {
-                Pattern::Bricks => bricks(u, v).height,
-                Pattern::Pyramids => pyramid_height(u, v),
-                Pattern::Cobblestones => cobbles(u, v).height,
-                Pattern::Text => text(u, v).height,
-                Pattern::Waves => waves_height(u, v),
-                Pattern::Spike => unreachable!("handled above"),
-            }
+    let heights = per_texel(w, h, |x, y| {
+        let (u, v) = texel_uv(x, y, w, h);
+        match pattern {
+            Pattern::Bricks => bricks(u, v).height,
+            Pattern::Pyramids => pyramid_height(u, v),
+            Pattern::Cobblestones => cobbles(u, v).height,
+            Pattern::Text => text(u, v).height,
+            Pattern::Spike => spike_height(x, y, w, h),
+            Pattern::Waves => waves_height(u, v),
         }
     });
     HeightField::from_height_fn(w, h, |x, y| heights[y as usize * w as usize + x as usize])
@@ -125,8 +123,8 @@ pub fn generate(pattern: Pattern, width: u32, height: u32) -> HeightField {
 /// A colour map matching [`generate`]'s height map: `width * height` sRGB texels, row-major,
 /// top row first (a size of 0 is treated as 1).
 ///
-/// Bricks are red-brown with a per-brick tint in grey mortar, pyramids sandstone with faint
-/// strata, cobblestones grey to brown per stone on dark soil, text brass letters on a slate
+/// Bricks are red-brown with a per-brick tint in grey mortar, pyramids sandstone laid in
+/// courses, cobblestones grey to brown per stone on dark soil, text brass letters on a slate
 /// plate, waves deep to pale blue by height, and the spike an orange texel on light grey.
 #[must_use]
 pub fn albedo(pattern: Pattern, width: u32, height: u32) -> Vec<[u8; 3]> {
@@ -188,9 +186,9 @@ fn hash01(a: u32, b: u32, c: u32) -> f32 {
     (hash3(a, b, c) >> 8) as f32 / (1u32 << 24) as f32
 }
 
-/// `i` wrapped into `0..n` (any sign), as the index of a periodic lattice.
+/// The lattice cell containing coordinate `i` (any sign), wrapped into `0..n`.
 fn wrap_index(i: f32, n: u32) -> u32 {
-    (i as i64).rem_euclid(i64::from(n)) as u32
+    (i.floor() as i64).rem_euclid(i64::from(n)) as u32
 }
 
 /// Hermite smoothstep of `t` clamped to `[0, 1]`.
@@ -315,12 +313,21 @@ fn pyramid_height(u: f32, v: f32) -> f32 {
 
 fn pyramid_albedo(u: f32, v: f32) -> [f32; 3] {
     let h = pyramid_height(u, v);
-    // Faint horizontal courses of stone: a dark line every 1/8 of the height.
-    let band = ((h * 8.0).fract() - 0.5).abs() * 2.0;
-    let line = smoothstep((band - 0.8) / 0.12);
-    let sand = fbm(u, v, 24, 11);
-    let base = mix([0.8, 0.66, 0.46], [0.87, 0.76, 0.56], sand);
-    scale(base, 0.97 - 0.2 * line + 0.05 * value_noise(u, v, 96, 12))
+    // Six courses of stone up each pyramid, each a slightly different tone, with a darker
+    // joint between them; each pyramid gets its own hue of sandstone.
+    let courses = 6.0 * h;
+    let course = courses.floor().min(5.0);
+    let f = courses - course;
+    let joint = 1.0 - smoothstep(f.min(1.0 - f) / 0.15);
+    let cell = hash3(
+        wrap_index(u * PYRAMIDS_PER_TILE, PYRAMIDS_PER_TILE as u32),
+        wrap_index(v * PYRAMIDS_PER_TILE, PYRAMIDS_PER_TILE as u32),
+        11,
+    );
+    let tone = 0.93 + 0.08 * hash01(cell, course as u32, 12);
+    let sand = fbm(u, v, 24, 13);
+    let base = mix([0.78, 0.64, 0.44], [0.88, 0.76, 0.55], 0.6 * sand + 0.4 * hash01(cell, 99, 14));
+    scale(base, tone - 0.12 * joint + 0.05 * value_noise(u, v, 96, 15))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -389,7 +396,7 @@ fn cobbles(u: f32, v: f32) -> CobbleSample {
         sum += (-COBBLE_SOFTNESS * d).exp();
     }
     let border = if sum > 0.0 { -sum.ln() / COBBLE_SOFTNESS } else { 1.0 };
-    let dome = quarter_round((border - COBBLE_GAP) / COBBLE_ROUND) * f32::from(border > COBBLE_GAP);
+    let dome = quarter_round((border - COBBLE_GAP) / COBBLE_ROUND);
     let gap = 0.08 + 0.08 * fbm(u, v, 24, 24);
     let top = 0.85 + 0.15 * hash01(id, 2, 25) - 0.03 * fbm(u, v, 20, 26);
     CobbleSample { height: gap + (top - gap) * dome, dome, id }

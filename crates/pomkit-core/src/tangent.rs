@@ -363,8 +363,9 @@ fn lengyel_sums(mesh: &Mesh<'_>) -> (Vec<DVec3>, Vec<DVec3>) {
         let p0 = mesh.positions[i0].as_dvec3();
         let e1 = mesh.positions[i1].as_dvec3() - p0;
         let e2 = mesh.positions[i2].as_dvec3() - p0;
-        // Zero-area triangles contribute nothing (the tangent would lie along a line).
-        if !(e1.cross(e2).length() > AREA_EPS * e1.length() * e2.length()) {
+        // Zero-area triangles contribute nothing (their tangent would lie along a line). The
+        // products are finite: differences of f32 values cannot overflow f64.
+        if e1.cross(e2).length() <= AREA_EPS * e1.length() * e2.length() {
             continue;
         }
         let w0 = mesh.uvs[i0].as_dvec2();
@@ -375,7 +376,7 @@ fn lengyel_sums(mesh: &Mesh<'_>) -> (Vec<DVec3>, Vec<DVec3>) {
         let det = x1 * y2 - x2 * y1;
         // Listing 7.4 divides by det unconditionally; skip degenerate UVs instead. The test is
         // relative to the UV edge lengths, so it does not depend on the texture's scale.
-        if !(det.abs() > UV_EPS * x1.hypot(y1) * x2.hypot(y2)) {
+        if det.abs() <= UV_EPS * x1.hypot(y1) * x2.hypot(y2) {
             continue;
         }
         let r = det.recip();
@@ -507,7 +508,10 @@ impl mikktspace::Geometry for MikkAdapter<'_> {
     fn tex_coord(&self, face: usize, vert: usize) -> [f32; 2] {
         // v' = 1 - v (DESIGN section 2): MikkTSpace's bitangent then points along decreasing
         // v and an unmirrored quad is orientation preserving (w = +1).
-        self.mesh.uvs.get(self.vertex(face, vert)).map_or([0.0; 2], |uv| [uv.x * self.uv_scale, (1.0 - uv.y) * self.uv_scale])
+        self.mesh
+            .uvs
+            .get(self.vertex(face, vert))
+            .map_or([0.0; 2], |uv| [uv.x * self.uv_scale, (1.0 - uv.y) * self.uv_scale])
     }
 
     fn set_tangent_encoded(&mut self, tangent: [f32; 4], face: usize, vert: usize) {
@@ -668,7 +672,8 @@ mod tests {
         let (mut p, mut uv) = (vec![], vec![]);
         for j in 0..=rows {
             for i in 0..=columns {
-                let (phi, theta) = (TAU * f64::from(i % columns) / f64::from(columns), PI * f64::from(j) / f64::from(rows));
+                let (phi, theta) =
+                    (TAU * f64::from(i % columns) / f64::from(columns), PI * f64::from(j) / f64::from(rows));
                 let pos = if j == 0 {
                     DVec3::Z
                 } else if j == rows {
@@ -860,14 +865,18 @@ mod tests {
     }
 
     /// Two unit quads side by side in the xy plane sharing the edge x = 1 through duplicated
-    /// vertices; the right quad's UVs are mirrored in u (a mirrored UV island).
-    fn mirrored_halves() -> MeshData {
+    /// vertices; the right quad's UVs are mirrored in u (`mirror_u`) or in v (a mirrored UV
+    /// island).
+    fn mirrored_halves(mirror_u: bool) -> MeshData {
         let mut p = vec![];
         let mut uv = vec![];
-        for (x, u) in [(0.0, 0.0), (1.0, 1.0), (1.0, 1.0), (2.0, 0.0)] {
-            for y in [0.0, 1.0] {
+        for (k, x) in [0.0, 1.0, 1.0, 2.0].into_iter().enumerate() {
+            for y in [0.0f32, 1.0] {
                 p.push(Vec3::new(x, y, 0.0));
-                uv.push(Vec2::new(u, 1.0 - y));
+                let right = k >= 2;
+                let u = if right && mirror_u { 2.0 - x } else { x };
+                let v = if right && !mirror_u { y } else { 1.0 - y };
+                uv.push(Vec2::new(u, v));
             }
         }
         // Vertices: 0 (0,0) 1 (0,1) | 2 (1,0) 3 (1,1) | 4 (1,0) 5 (1,1) | 6 (2,0) 7 (2,1).
@@ -878,17 +887,36 @@ mod tests {
 
     #[test]
     fn welding_keeps_mirrored_copies_apart() {
-        let (p, n, uv, idx) = mirrored_halves();
+        for mirror_u in [true, false] {
+            let (p, n, uv, idx) = mirrored_halves(mirror_u);
+            let right_t = if mirror_u { -Vec3::X } else { Vec3::X };
+            for method in BOTH {
+                let t = compute_tangents(&p, &n, &uv, &idx, &opts(method, true)).unwrap();
+                let what = format!("{method:?} mirror_u {mirror_u}: {t:?}");
+                for (v, tv) in t.iter().enumerate() {
+                    let (expected_t, expected_w) = if v < 4 { (Vec3::X, 1.0) } else { (right_t, -1.0) };
+                    assert!(degrees_between(tv.truncate(), expected_t) < 1e-3, "{what}");
+                    assert_eq!(tv.w, expected_w, "{what}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_vertex_shared_across_a_mirror_line_takes_its_majority_handedness() {
+        // As `mirrored_halves(true)`, but the right quad uses vertices 2 and 3 themselves.
+        // Vertex 2 has one corner on the left (w = +1) and two on the right (w = -1); vertex 3
+        // the other way round.
+        let (p, n, uv, _) = mirrored_halves(true);
+        let idx = vec![0, 2, 3, 0, 3, 1, 2, 6, 7, 2, 7, 3];
         for method in BOTH {
             let t = compute_tangents(&p, &n, &uv, &idx, &opts(method, true)).unwrap();
-            for v in 0..4 {
-                assert!(degrees_between(t[v].truncate(), Vec3::X) < 1e-3, "{method:?} {v}: {}", t[v]);
-                assert_eq!(t[v].w, 1.0);
-            }
-            for v in 4..8 {
-                assert!(degrees_between(t[v].truncate(), -Vec3::X) < 1e-3, "{method:?} {v}: {}", t[v]);
-                assert_eq!(t[v].w, -1.0);
-            }
+            assert_valid(&t, &n);
+            let what = format!("{method:?}: {t:?}");
+            assert!(degrees_between(t[2].truncate(), -Vec3::X) < 1e-3, "{what}");
+            assert_eq!(t[2].w, -1.0, "{what}");
+            assert!(degrees_between(t[3].truncate(), Vec3::X) < 1e-3, "{what}");
+            assert_eq!(t[3].w, 1.0, "{what}");
         }
     }
 
@@ -937,6 +965,37 @@ mod tests {
     }
 
     #[test]
+    fn zero_area_triangles_contribute_nothing() {
+        // A unit quad plus a collinear triangle at vertex 0 whose UVs would give t = -y.
+        let (mut p, mut n, mut uv, mut idx) = plane(1, false);
+        let uv0 = uv[0];
+        p.extend([Vec3::new(0.0, -1.0, 0.0), Vec3::new(0.0, -2.0, 0.0)]);
+        n.extend([Vec3::Z; 2]);
+        uv.extend([uv0 + Vec2::X, uv0 - Vec2::Y]);
+        idx.extend([0, 4, 5]);
+        let t = compute_tangents(&p, &n, &uv, &idx, &opts(TangentMethod::Lengyel, true)).unwrap();
+        assert_valid(&t, &n);
+        assert!(degrees_between(t[0].truncate(), Vec3::X) < 1e-3, "{}", t[0]);
+    }
+
+    #[test]
+    fn a_tangent_parallel_to_the_normal_gets_the_fallback() {
+        // The UVs say T = +x, the normals say N = +x.
+        let (p, _, uv, idx) = plane(2, false);
+        let n = vec![Vec3::X; p.len()];
+        let fallback = Vec3::X.any_orthonormal_vector().extend(1.0);
+        for method in BOTH {
+            let t = compute_tangents(&p, &n, &uv, &idx, &opts(method, true)).unwrap();
+            assert!(t.iter().all(|&t| t == fallback), "{method:?}: {t:?}");
+        }
+        // Nearly parallel: the perpendicular part is rounding noise, not a direction.
+        let n = vec![Vec3::new(1.0, 0.0, 1e-6).normalize(); p.len()];
+        let fallback = n[0].any_orthonormal_vector().extend(1.0);
+        let t = compute_tangents(&p, &n, &uv, &idx, &opts(TangentMethod::Lengyel, true)).unwrap();
+        assert!(t.iter().all(|&t| t == fallback), "{t:?}");
+    }
+
+    #[test]
     fn degenerate_uvs_get_finite_perpendicular_tangents() {
         let p = vec![Vec3::ZERO, Vec3::X, Vec3::Y];
         let n = vec![Vec3::new(0.3, -0.2, 1.0); 3];
@@ -957,6 +1016,25 @@ mod tests {
         let t = compute_tangents(&p, &n, &uv, &[0, 1, 2], &TangentOptions::default()).unwrap();
         // The normals fall back to +Z (no area), the tangents to a vector perpendicular to it.
         assert_valid(&t, &[Vec3::Z; 3]);
+        // ... and that without mikktspace panicking (a caught panic would give `None`).
+        let unit = unit_normals(&p, &n, &[0, 1, 2]);
+        let mesh = Mesh { positions: &p, normals: &unit, uvs: &uv, indices: &[0, 1, 2] };
+        assert!(mikktspace_tangents(&mesh).is_some());
+    }
+
+    #[test]
+    fn lengyel_ignores_nearly_degenerate_uvs() {
+        // A unit quad plus a triangle at vertex 0 whose UVs are almost collinear (sine of the
+        // UV angle about 1e-7): its t = 2 e1 - e2 would pull vertex 0's tangent 18 degrees off.
+        let (mut p, mut n, mut uv, mut idx) = plane(1, false);
+        let uv0 = uv[0];
+        p.extend([Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, -1.0, 0.0)]);
+        n.extend([Vec3::Z; 2]);
+        uv.extend([uv0 + Vec2::new(1.0, 1.2e-7), uv0 + Vec2::new(1.0, 2.4e-7)]);
+        idx.extend([0, 4, 5]);
+        let t = compute_tangents(&p, &n, &uv, &idx, &opts(TangentMethod::Lengyel, true)).unwrap();
+        assert_valid(&t, &n);
+        assert!(degrees_between(t[0].truncate(), Vec3::X) < 1e-3, "{}", t[0]);
     }
 
     #[test]
@@ -1024,7 +1102,10 @@ mod tests {
         assert!(matches!(compute_vertex_normals(&pn, &idx), Err(TangentError::NonFinitePosition { vertex: 2, .. })));
         let mut nn = n.clone();
         nn[3].x = f32::INFINITY;
-        assert!(matches!(compute_tangents(&p, &nn, &uv, &idx, &o), Err(TangentError::NonFiniteNormal { vertex: 3, .. })));
+        assert!(matches!(
+            compute_tangents(&p, &nn, &uv, &idx, &o),
+            Err(TangentError::NonFiniteNormal { vertex: 3, .. })
+        ));
         let mut un = uv.clone();
         un[1].x = f32::NEG_INFINITY;
         assert!(matches!(compute_tangents(&p, &n, &un, &idx, &o), Err(TangentError::NonFiniteUv { vertex: 1, .. })));

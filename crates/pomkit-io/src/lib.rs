@@ -81,20 +81,20 @@ pub struct HeightLoadOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
     /// The file could not be opened or read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {reason}")]
     Read {
         /// The file.
         path: PathBuf,
         /// The operating system's reason.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The file is not an image pomkit can decode, or it is truncated or corrupt.
-    #[error("cannot decode {path} as an image: {source}")]
+    #[error("cannot decode {path} as an image: {reason}")]
     Decode {
         /// The file.
         path: PathBuf,
         /// The decoder's reason.
-        source: image::ImageError,
+        reason: image::ImageError,
     },
     /// The image has no pixels.
     #[error("{path} is {width}x{height}: an image needs at least one pixel")]
@@ -157,28 +157,28 @@ pub enum IoError {
     },
     /// The output could not be written (missing folder, no permission, disk full...). Nothing
     /// was left at the destination.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {reason}")]
     Write {
         /// The file.
         path: PathBuf,
         /// The reason.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The encoder failed. Nothing was left at the destination.
-    #[error("cannot encode {path}: {source}")]
+    #[error("cannot encode {path}: {reason}")]
     Encode {
         /// The file.
         path: PathBuf,
         /// The encoder's reason.
-        source: image::ImageError,
+        reason: image::ImageError,
     },
     /// The pixels do not form a valid height field.
-    #[error("{path}: {source}")]
+    #[error("{path}: {reason}")]
     Field {
         /// The file.
         path: PathBuf,
         /// What is wrong.
-        source: HeightFieldError,
+        reason: HeightFieldError,
     },
 }
 
@@ -187,7 +187,7 @@ pub enum IoError {
 /// # Errors
 /// Any [`IoError`] reading or decoding the file, or converting its pixels.
 pub fn load_height_field(path: &Path, opts: &HeightLoadOptions) -> Result<HeightField, IoError> {
-    let bytes = std::fs::read(path).map_err(|source| IoError::Read { path: path.to_owned(), source })?;
+    let bytes = std::fs::read(path).map_err(|reason| IoError::Read { path: path.to_owned(), reason })?;
     decode_height_field(&bytes, path, opts)
 }
 
@@ -197,9 +197,9 @@ pub fn load_height_field(path: &Path, opts: &HeightLoadOptions) -> Result<Height
 /// # Errors
 /// As [`load_height_field`].
 pub fn decode_height_field(bytes: &[u8], path: &Path, opts: &HeightLoadOptions) -> Result<HeightField, IoError> {
-    let decode_err = |source| IoError::Decode { path: path.to_owned(), source };
+    let decode_err = |reason| IoError::Decode { path: path.to_owned(), reason };
     let reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().map_err(|e| {
-        IoError::Read { path: path.to_owned(), source: e }
+        IoError::Read { path: path.to_owned(), reason: e }
     })?;
     let img = reader.decode().map_err(decode_err)?;
     image_to_height_field(&img, path, opts)
@@ -288,7 +288,7 @@ fn heights_from_values(
     } else {
         HeightField::from_heights(width, height, values)
     };
-    field.map_err(|source| IoError::Field { path: path.to_owned(), source })
+    field.map_err(|reason| IoError::Field { path: path.to_owned(), reason })
 }
 
 /// `[r, g, b]` to `[r, g, b, a]`.
@@ -334,6 +334,22 @@ impl PixelLayout {
     }
 }
 
+/// Checks that `path`'s extension fits `layout` (`.png` for 8/16-bit, `.exr` for float), so a
+/// command can fail before doing heavy work.
+///
+/// # Errors
+/// [`IoError::UnsupportedOutput`] naming the extensions that work.
+pub fn check_output(path: &Path, layout: PixelLayout) -> Result<(), IoError> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    match (layout.is_float(), ext.as_str()) {
+        (true, "exr") | (false, "png") => Ok(()),
+        (true, _) => Err(IoError::UnsupportedOutput { path: path.to_owned(), what: "float data", expected: ".exr" }),
+        (false, _) => {
+            Err(IoError::UnsupportedOutput { path: path.to_owned(), what: "8- or 16-bit data", expected: ".png" })
+        }
+    }
+}
+
 /// Pixel data to write: 8-bit, 16-bit or float samples, interleaved, row-major.
 #[derive(Clone, Copy, Debug)]
 pub enum Pixels<'a> {
@@ -357,17 +373,8 @@ pub enum Pixels<'a> {
 /// If the sample count does not equal `width * height * channels`, or the sample type does
 /// not fit the layout (a programming error, not bad input).
 pub fn write_image(path: &Path, width: u32, height: u32, layout: PixelLayout, pixels: Pixels<'_>) -> Result<(), IoError> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    check_output(path, layout)?;
     let want_exr = layout.is_float();
-    match (want_exr, ext.as_str()) {
-        (true, "exr") | (false, "png") => {}
-        (true, _) => {
-            return Err(IoError::UnsupportedOutput { path: path.to_owned(), what: "float data", expected: ".exr" });
-        }
-        (false, _) => {
-            return Err(IoError::UnsupportedOutput { path: path.to_owned(), what: "8- or 16-bit data", expected: ".png" });
-        }
-    }
     let n = width as usize * height as usize * layout.channels();
     let img: DynamicImage = match (layout, pixels) {
         (PixelLayout::Gray8, Pixels::U8(p)) => {
@@ -439,7 +446,7 @@ pub fn write_atomically(
     path: &Path,
     body: impl FnOnce(&mut std::fs::File) -> Result<(), WriteFail>,
 ) -> Result<(), IoError> {
-    let write_err = |source| IoError::Write { path: path.to_owned(), source };
+    let write_err = |reason| IoError::Write { path: path.to_owned(), reason };
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
         _ => PathBuf::from("."),
@@ -447,10 +454,14 @@ pub fn write_atomically(
     if path.is_dir() {
         return Err(write_err(std::io::Error::new(std::io::ErrorKind::IsADirectory, "it is a folder")));
     }
+    if !dir.is_dir() {
+        let msg = format!("its folder {} does not exist", dir.display());
+        return Err(write_err(std::io::Error::new(std::io::ErrorKind::NotFound, msg)));
+    }
     let mut tmp = tempfile::Builder::new().prefix(".pomkit-").suffix(".tmp").tempfile_in(&dir).map_err(write_err)?;
     body(tmp.as_file_mut()).map_err(|e| match e {
-        WriteFail::Io(source) => IoError::Write { path: path.to_owned(), source },
-        WriteFail::Encode(source) => IoError::Encode { path: path.to_owned(), source },
+        WriteFail::Io(reason) => IoError::Write { path: path.to_owned(), reason },
+        WriteFail::Encode(reason) => IoError::Encode { path: path.to_owned(), reason },
     })?;
     tmp.as_file().sync_all().map_err(write_err)?;
     tmp.persist(path).map_err(|e| write_err(e.error))?;

@@ -1,0 +1,190 @@
+//! `pomkit bake` and `pomkit generate` end to end: outputs decode to what core computes, and bad
+//! input fails with a clear message and leaves no file behind (DESIGN section 6).
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use pomkit_core::bake::{self, NormalBakeOptions, NormalFilter};
+use pomkit_core::glam::Vec3;
+use pomkit_core::procedural::{self, Pattern};
+
+fn pomkit(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_pomkit")).args(args).current_dir(dir).output().expect("pomkit runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Files in `dir`, sorted, to prove nothing partial was left.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn bake_normal_from_a_generated_height_map_matches_core() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = pomkit(&["generate", "pyramids", "-o", "h.png", "--size", "48x40"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = pomkit(&["bake", "normal", "h.png", "-o", "n.png", "--scale", "5", "--filter", "sobel"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let img = image::open(dir.path().join("n.png")).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (48, 40));
+    // Independent path: core on the generated field, quantised through the 16-bit file.
+    let field = procedural::generate(Pattern::Pyramids, 48, 40);
+    let q = pomkit_core::HeightField::from_heights(
+        48,
+        40,
+        field.heights().iter().map(|h| (h * 65535.0).round() / 65535.0).collect(),
+    )
+    .unwrap();
+    let opts = NormalBakeOptions { scale: 5.0, filter: NormalFilter::Sobel, ..Default::default() };
+    let expect = bake::bake_normals(&q, &opts).unwrap();
+    for (i, px) in img.pixels().enumerate() {
+        assert_eq!(px.0, bake::encode_rgb8(expect[i]), "texel {i}");
+    }
+}
+
+#[test]
+fn encodings_and_conventions_reach_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        let out = pomkit(args, dir.path());
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+    };
+    run(&["bake", "normal", "builtin:waves:32x32", "-o", "up.png"]);
+    run(&["bake", "normal", "builtin:waves:32x32", "-o", "down.png", "--y-down"]);
+    run(&["bake", "normal", "builtin:waves:32x32", "-o", "rg.png", "--encoding", "rg8"]);
+    run(&["bake", "normal", "builtin:waves:32x32", "-o", "f.exr", "--encoding", "float"]);
+    run(&["bake", "normal", "builtin:waves:32x32", "-o", "deep.png", "--depth-map"]);
+    let up = image::open(dir.path().join("up.png")).unwrap().to_rgb8();
+    let down = image::open(dir.path().join("down.png")).unwrap().to_rgb8();
+    let rg = image::open(dir.path().join("rg.png")).unwrap().to_rgb8();
+    let deep = image::open(dir.path().join("deep.png")).unwrap().to_rgb8();
+    let float = image::open(dir.path().join("f.exr")).unwrap().to_rgb32f();
+    let mut saw_slope = false;
+    for (((a, b), (c, d)), e) in up.pixels().zip(down.pixels()).zip(rg.pixels().zip(deep.pixels())).zip(float.pixels()) {
+        // +Y down mirrors green about 127.5; red and blue agree.
+        assert_eq!(a.0[0], b.0[0]);
+        assert!((i32::from(a.0[1]) + i32::from(b.0[1]) - 255).abs() <= 1);
+        assert_eq!([a.0[0], a.0[1], 0], c.0);
+        // Read as depth, the relief inverts: x and y flip sign.
+        assert!((i32::from(a.0[0]) + i32::from(d.0[0]) - 255).abs() <= 1);
+        let n = Vec3::from_array(e.0);
+        assert!((n.length() - 1.0).abs() < 1e-5);
+        assert!((bake::decode_rgb8(a.0) - n).length() < 0.01);
+        saw_slope |= n.x.abs() > 0.2;
+    }
+    assert!(saw_slope, "waves should have slopes at scale 8");
+}
+
+#[test]
+fn parallax_and_pack_write_their_formats() {
+    let dir = tempfile::tempdir().unwrap();
+    for args in [
+        &["bake", "parallax", "builtin:bricks:64x32", "-o", "p.png"][..],
+        &["bake", "parallax", "builtin:bricks:64x32", "-o", "p.exr", "--encoding", "float"],
+        &["bake", "pack", "builtin:bricks:64x32", "-o", "nh.png"],
+    ] {
+        let out = pomkit(args, dir.path());
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+    }
+    let field = procedural::generate(Pattern::Bricks, 64, 32);
+    let expect = bake::bake_parallax(&field, &NormalBakeOptions::default()).unwrap();
+    let p8 = image::open(dir.path().join("p.png")).unwrap().to_luma8();
+    let pf = image::open(dir.path().join("p.exr")).unwrap().to_rgb32f();
+    for (i, (a, b)) in p8.pixels().zip(pf.pixels()).enumerate() {
+        assert!((f32::from(a.0[0]) / 255.0 * 2.0 - 1.0 - expect[i]).abs() <= 1.0 / 255.0 + 1e-6);
+        assert!((b.0[0] - expect[i]).abs() < 1e-6);
+    }
+    let nh = image::open(dir.path().join("nh.png")).unwrap();
+    assert!(nh.color().has_alpha());
+    // The packed map's alpha reads back as the same height field.
+    let out = pomkit(&["bake", "normal", "nh.png", "--channel", "a", "-o", "again.png"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn bad_input_fails_clearly_and_leaves_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let ok = pomkit(&["generate", "cobblestones", "-o", "h.png", "--size", "64x64"], dir.path());
+    assert!(ok.status.success());
+    let bytes = std::fs::read(dir.path().join("h.png")).unwrap();
+    std::fs::write(dir.path().join("truncated.png"), &bytes[..bytes.len() / 3]).unwrap();
+    std::fs::write(dir.path().join("notes.png"), b"this is not an image").unwrap();
+    // A 0x0 PNG cannot be made by an encoder; this one has a valid signature and a zero-size IHDR.
+    let mut zero = b"\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\0\0\0\0\0\0\x08\0\0\0\0".to_vec();
+    zero.extend_from_slice(&[0x3a, 0x7e, 0x9b, 0x55]);
+    std::fs::write(dir.path().join("zero.png"), &zero).unwrap();
+    image::GrayImage::from_raw(1, 1, vec![9]).unwrap().save(dir.path().join("one.png")).unwrap();
+    let before = listing(dir.path());
+
+    let cases: &[(&[&str], &str)] = &[
+        (&["bake", "normal", "truncated.png", "-o", "out.png"], "truncated.png"),
+        (&["bake", "normal", "notes.png", "-o", "out.png"], "notes.png"),
+        (&["bake", "normal", "zero.png", "-o", "out.png"], "zero.png"),
+        (&["bake", "normal", "one.png", "-o", "out.png"], "1x1"),
+        (&["bake", "normal", "missing.png", "-o", "out.png"], "missing.png"),
+        (&["bake", "normal", "h.png", "-o", "out.png", "--scale", "NaN"], "--scale"),
+        (&["bake", "normal", "h.png", "-o", "out.png", "--scale", "inf"], "--scale"),
+        (&["bake", "normal", "h.png", "-o", "out.png", "--channel", "q"], "--channel"),
+        (&["bake", "normal", "h.png", "-o", "out.png", "--channel", "a"], "no alpha"),
+        (&["bake", "normal", "h.png", "-o", "out.exr"], ".png"),
+        (&["bake", "normal", "h.png", "-o", "out.png", "--encoding", "float"], ".exr"),
+        (&["bake", "normal", "h.png", "-o", "no/such/dir/out.png"], "does not exist"),
+        (&["bake", "parallax", "one.png", "-o", "out.png"], "1x1"),
+        (&["bake", "pack", "builtin:nosuch", "-o", "out.png"], "nosuch"),
+        (&["bake", "normal", "builtin:bricks:0x5", "-o", "out.png"], "between 1 and 16384"),
+        (&["generate", "marble", "-o", "out.png"], "marble"),
+    ];
+    for (args, needle) in cases {
+        let out = pomkit(args, dir.path());
+        assert!(!out.status.success(), "{args:?} should fail");
+        let msg = stderr(&out);
+        assert!(msg.contains(needle), "{args:?}: message {msg:?} should mention {needle:?}");
+        assert!(!msg.contains("panicked"), "{args:?} panicked: {msg}");
+        assert_eq!(listing(dir.path()), before, "{args:?} left a file behind");
+    }
+}
+
+#[test]
+fn unwritable_output_leaves_the_old_file_intact() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("keep.png");
+    std::fs::write(&target, b"old contents").unwrap();
+    // Writing a folder's name fails; and a failed bake must not touch an existing output.
+    std::fs::create_dir(dir.path().join("folder.png")).unwrap();
+    let out = pomkit(&["bake", "normal", "builtin:bricks:16x16", "-o", "folder.png"], dir.path());
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("folder.png"));
+    let out = pomkit(&["bake", "normal", "builtin:bricks:1x1", "-o", "keep.png"], dir.path());
+    assert!(!out.status.success());
+    assert_eq!(std::fs::read(&target).unwrap(), b"old contents");
+    assert_eq!(listing(dir.path()), vec!["folder.png".to_owned(), "keep.png".to_owned()]);
+}
+
+#[test]
+fn every_verb_has_help() {
+    let dir = tempfile::tempdir().unwrap();
+    for args in [
+        &["--help"][..],
+        &["bake", "--help"],
+        &["bake", "normal", "--help"],
+        &["bake", "parallax", "--help"],
+        &["bake", "pack", "--help"],
+        &["generate", "--help"],
+    ] {
+        let out = pomkit(args, dir.path());
+        assert!(out.status.success(), "{args:?}");
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.contains("Usage"), "{args:?}");
+    }
+    let out = pomkit(&["bake", "normal", "--help"], dir.path());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for flag in ["--scale", "--filter", "--edges", "--encoding", "--y-down", "--depth-map", "--channel"] {
+        assert!(text.contains(flag), "bake normal --help lacks {flag}");
+    }
+}
