@@ -162,17 +162,11 @@ fn normal(a: &NormalArgs) -> Result<()> {
     match a.encoding {
         NormalEncoding::Rgb8 | NormalEncoding::Rg8 => {
             let mut px = vec![[0u8; 3]; field.depths().len()];
-            let rg = a.encoding == NormalEncoding::Rg8;
-            bake::bake_normals_into(
-                &field,
-                &opts,
-                &mut px,
-                |n| {
-                    let [r, g, b] = bake::encode_rgb8(n);
-                    if rg { [r, g, 0] } else { [r, g, b] }
-                },
-                &tick,
-            )?;
+            bake::bake_normals_rgb8(&field, &opts, &mut px, &tick)?;
+            if a.encoding == NormalEncoding::Rg8 {
+                // Two-channel storage: z is rebuilt on read (eq. 7.44), blue carries nothing.
+                px.iter_mut().for_each(|p| p[2] = 0);
+            }
             pb.finish_and_clear();
             pomkit_io::write_image(&a.output, w, h, layout, Pixels::U8(px.as_flattened()))?;
         }

@@ -78,7 +78,9 @@ impl HeightInput {
             let (name, size) = spec.split_once(':').unwrap_or((spec, "512x512"));
             let pattern: Pattern = name.parse().with_context(|| format!("input {}", self.input))?;
             let (w, h) = parse_size(size).with_context(|| format!("input {}", self.input))?;
-            let field = procedural::generate(pattern, w, h);
+            let field = progress::spinner(u64::from(w) * u64::from(h), &format!("generating {name} {w}x{h}"), || {
+                procedural::generate(pattern, w, h)
+            });
             return Ok(if self.depth_map {
                 // The builtin is a height map; read as depth it is inverted, as a file would be.
                 HeightField::from_depths(w, h, field.heights()).context("inverting builtin")?
@@ -86,7 +88,8 @@ impl HeightInput {
                 field
             });
         }
-        let opts = HeightLoadOptions { depth_map: self.depth_map, channel: self.channel.into(), normalize: self.normalize };
+        let opts =
+            HeightLoadOptions { depth_map: self.depth_map, channel: self.channel.into(), normalize: self.normalize };
         Ok(pomkit_io::load_height_field(&PathBuf::from(&self.input), &opts)?)
     }
 }
@@ -122,7 +125,10 @@ struct GenerateArgs {
 fn generate(args: &GenerateArgs) -> Result<()> {
     let pattern: Pattern = args.pattern.parse()?;
     let (w, h) = parse_size(&args.size)?;
-    let field = procedural::generate(pattern, w, h);
+    let field =
+        progress::spinner(u64::from(w) * u64::from(h), &format!("generating {} {w}x{h}", pattern.name()), || {
+            procedural::generate(pattern, w, h)
+        });
     let samples: Vec<u16> = field.heights().iter().map(|&v| (v * 65535.0).round() as u16).collect();
     pomkit_io::write_image(&args.output, w, h, PixelLayout::Gray16, Pixels::U16(&samples))?;
     eprintln!("wrote {} ({w}x{h} height map, {})", args.output.display(), pattern.name());

@@ -1,8 +1,10 @@
 //! Progress bars for long work: shown on a terminal for jobs big enough to take a while.
 
+use std::time::Duration;
+
 use indicatif::{ProgressBar, ProgressStyle};
 
-/// Work below this many units of `per_unit` texels finishes in well under a second.
+/// Jobs over fewer texels than this finish in well under a second: no bar.
 const MIN_TEXELS: u64 = 2_000_000;
 
 /// A bar over `total` units (rows, tiles...) of about `texels_per_unit` texels each, hidden for
@@ -19,4 +21,17 @@ pub fn bar(total: u64, texels_per_unit: u64, what: &str) -> ProgressBar {
     );
     pb.set_message(what.to_owned());
     pb
+}
+
+/// Runs `work` under a spinner labelled `what` when it covers enough texels to take a while.
+pub fn spinner<T>(texels: u64, what: &str, work: impl FnOnce() -> T) -> T {
+    if texels < MIN_TEXELS {
+        return work();
+    }
+    let pb = ProgressBar::new_spinner();
+    pb.set_message(what.to_owned());
+    pb.enable_steady_tick(Duration::from_millis(120));
+    let out = work();
+    pb.finish_and_clear();
+    out
 }

@@ -66,7 +66,8 @@ fn encodings_and_conventions_reach_the_file() {
     let deep = image::open(dir.path().join("deep.png")).unwrap().to_rgb8();
     let float = image::open(dir.path().join("f.exr")).unwrap().to_rgb32f();
     let mut saw_slope = false;
-    for (((a, b), (c, d)), e) in up.pixels().zip(down.pixels()).zip(rg.pixels().zip(deep.pixels())).zip(float.pixels()) {
+    for (((a, b), (c, d)), e) in up.pixels().zip(down.pixels()).zip(rg.pixels().zip(deep.pixels())).zip(float.pixels())
+    {
         // +Y down mirrors green about 127.5; red and blue agree.
         assert_eq!(a.0[0], b.0[0]);
         assert!((i32::from(a.0[1]) + i32::from(b.0[1]) - 255).abs() <= 1);

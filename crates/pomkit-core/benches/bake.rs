@@ -5,7 +5,7 @@
 //! `cargo bench -p pomkit-core --bench bake`; figures go in docs/BENCHMARKS.md.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals_into, encode_rgb8};
+use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals_rgb8};
 use pomkit_core::procedural::{Pattern, generate};
 use std::hint::black_box;
 
@@ -27,7 +27,7 @@ fn bench_bake(c: &mut Criterion) {
         let opts = NormalBakeOptions { filter, ..Default::default() };
         group.bench_function(format!("normal_rgb8_{filter:?}").to_lowercase(), |b| {
             b.iter(|| {
-                bake_normals_into(black_box(&field), &opts, &mut out, encode_rgb8, &|_| {}).expect("valid options");
+                bake_normals_rgb8(black_box(&field), &opts, &mut out, &|_| {}).expect("valid options");
                 black_box(&out);
             });
         });

@@ -142,10 +142,9 @@ pub fn bake_normals(field: &HeightField, opts: &NormalBakeOptions) -> Result<Vec
     Ok(out)
 }
 
-/// Bakes normals straight into an encoded buffer (for instance `[u8; 3]` via [`encode_rgb8`]),
-/// rows in parallel, calling `progress(rows)` as each band of rows finishes.
-///
-/// Fusing the encoder into the loop keeps a 4096x4096 bake to one pass over memory.
+/// Bakes normals straight into an encoded buffer (for instance `[f32; 3]`), rows in parallel,
+/// calling `progress(rows)` as each band of rows finishes. For RGB8 output use the faster
+/// [`bake_normals_rgb8`], which gives the same bytes as `encode_rgb8`.
 ///
 /// # Errors
 /// See [`NormalBakeOptions::validate`]; [`BakeError::OutputSize`] if `out` does not hold one
@@ -157,47 +156,144 @@ pub fn bake_normals_into<T: Send>(
     encode: impl Fn(Vec3) -> T + Sync,
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<(), BakeError> {
+    bake_rows(field, opts, out, progress, |rn, row| {
+        normalize_row(rn);
+        for (i, px) in row.iter_mut().enumerate() {
+            *px = encode(Vec3::new(rn.x[i], rn.y[i], rn.z[i]));
+        }
+    })
+}
+
+/// Bakes an RGB8 normal map (`n * 0.5 + 0.5`, exactly [`encode_rgb8`] per texel) into `out`,
+/// rows in parallel, calling `progress(rows)` as each band of rows finishes.
+///
+/// The whole bake is two vectorized passes per row over structure-of-arrays scratch space, so a
+/// 4096x4096 map costs a few memory copies' worth of time (see docs/BENCHMARKS.md).
+///
+/// # Errors
+/// As [`bake_normals_into`].
+pub fn bake_normals_rgb8(
+    field: &HeightField,
+    opts: &NormalBakeOptions,
+    out: &mut [[u8; 3]],
+    progress: &(dyn Fn(u32) + Sync),
+) -> Result<(), BakeError> {
+    bake_rows(field, opts, out, progress, |rn, row| {
+        let n = row.len();
+        // Normalize and quantize in one vectorized pass over the slopes into packed words,
+        // then scatter three bytes per texel.
+        let words = &mut rn.q[..n];
+        for (i, word) in words.iter_mut().enumerate() {
+            let (gx, gy) = (rn.x[i], rn.y[i]);
+            let inv = 1.0 / (gx * gx + gy * gy + 1.0).sqrt();
+            let (r, g, b) = (quantize_unit(gx * inv), quantize_unit(gy * inv), quantize_unit(inv));
+            *word = u32::from(r) | u32::from(g) << 8 | u32::from(b) << 16;
+        }
+        for (px, word) in row.iter_mut().zip(words.iter()) {
+            let [r, g, b, _] = word.to_le_bytes();
+            *px = [r, g, b];
+        }
+    })
+}
+
+/// One row's scaled slopes, then normals, in structure-of-arrays form, plus byte scratch.
+struct RowNormals {
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+    q: Vec<u32>,
+}
+
+/// Runs `emit` on every row's normals, bands of rows in parallel.
+fn bake_rows<T: Send>(
+    field: &HeightField,
+    opts: &NormalBakeOptions,
+    out: &mut [T],
+    progress: &(dyn Fn(u32) + Sync),
+    emit: impl Fn(&mut RowNormals, &mut [T]) + Sync,
+) -> Result<(), BakeError> {
     opts.validate(field)?;
     let expected = field.depths().len();
     if out.len() != expected {
         return Err(BakeError::OutputSize { expected, got: out.len() });
     }
-    let w = field.width() as usize;
-    let h = field.height() as i64;
+    let (w, h) = (field.width() as usize, field.height());
     let depth = field.depths();
-    // Bands of rows keep rayon's overhead low and give the progress bar steady ticks.
+    // Bands of rows keep rayon's overhead low, reuse the scratch rows and give the progress bar
+    // steady ticks.
     let band = 16usize;
     out.par_chunks_mut(w * band).enumerate().for_each(|(b, chunk)| {
+        let mut rn = RowNormals { x: vec![0.0; w], y: vec![0.0; w], z: vec![0.0; w], q: vec![0; w] };
         for (r, row) in chunk.chunks_mut(w).enumerate() {
             let y = (b * band + r) as i64;
-            let up = &depth[opts.edges.resolve(y - 1, field.height()) as usize * w..][..w];
+            let up = &depth[opts.edges.resolve(y - 1, h) as usize * w..][..w];
             let mid = &depth[y as usize * w..][..w];
-            let down = &depth[opts.edges.resolve(y + 1, h as u32) as usize * w..][..w];
-            bake_row(up, mid, down, opts, row, &encode);
+            let down = &depth[opts.edges.resolve(y + 1, h) as usize * w..][..w];
+            row_normals(up, mid, down, opts, &mut rn);
+            emit(&mut rn, row);
         }
         progress((chunk.len() / w) as u32);
     });
     Ok(())
 }
 
-/// One row of normals from the rows above, at and below it (depth values).
-fn bake_row<T>(up: &[f32], mid: &[f32], down: &[f32], opts: &NormalBakeOptions, row: &mut [T], encode: &impl Fn(Vec3) -> T) {
+/// One row's scaled slopes `(s dd/dx, s dd/dy)` into `rn.x`, `rn.y`, from the depth rows above,
+/// at and below it; [`normalize_row`] makes them normals.
+///
+/// Interior columns run through branch-free loops over equal-length slices, which the compiler
+/// vectorizes; the two border columns resolve their neighbours through the edge mode.
+fn row_normals(up: &[f32], mid: &[f32], down: &[f32], opts: &NormalBakeOptions, rn: &mut RowNormals) {
     let w = mid.len();
-    let col = |x: i64| opts.edges.resolve(x, w as u32) as usize;
-    let at = |x: usize, row: &mut [T]| {
-        let (l, r) = if x == 0 || x + 1 == w { (col(x as i64 - 1), col(x as i64 + 1)) } else { (x - 1, x + 1) };
-        // Slopes of depth; height slopes are their negation (h = 1 - d).
-        let (ddx, ddy) = match opts.filter {
-            NormalFilter::Central => ((mid[r] - mid[l]) * 0.5, (up[x] - down[x]) * 0.5),
-            NormalFilter::Sobel => (
-                ((up[r] + 2.0 * mid[r] + down[r]) - (up[l] + 2.0 * mid[l] + down[l])) * 0.125,
-                ((up[l] + 2.0 * up[x] + up[r]) - (down[l] + 2.0 * down[x] + down[r])) * 0.125,
-            ),
-        };
-        row[x] = encode(normal_from_slope(-Vec2::new(ddx, ddy), opts.scale, opts.y_down));
+    // The normal is nrm(-s dh/dx, -s dh/dy, 1) = nrm(s dd/dx, s dd/dy, 1) since h = 1 - d.
+    let xs = opts.scale;
+    let ys = if opts.y_down { -opts.scale } else { opts.scale };
+    // Depth slopes along x and up the image at column x with neighbours l and r.
+    let slope = |l: usize, x: usize, r: usize| match opts.filter {
+        NormalFilter::Central => ((mid[r] - mid[l]) * 0.5, (up[x] - down[x]) * 0.5),
+        NormalFilter::Sobel => (
+            ((up[r] + 2.0 * mid[r] + down[r]) - (up[l] + 2.0 * mid[l] + down[l])) * 0.125,
+            ((up[l] + 2.0 * up[x] + up[r]) - (down[l] + 2.0 * down[x] + down[r])) * 0.125,
+        ),
     };
-    for x in 0..w {
-        at(x, row);
+    // Stage 1: scaled slopes into x and y.
+    for x in [0, w - 1] {
+        let l = opts.edges.resolve(x as i64 - 1, w as u32) as usize;
+        let r = opts.edges.resolve(x as i64 + 1, w as u32) as usize;
+        let (ddx, ddy) = slope(l, x, r);
+        (rn.x[x], rn.y[x]) = (ddx * xs, ddy * ys);
+    }
+    if w >= 3 {
+        let n = w - 2;
+        let (gx, gy) = (&mut rn.x[1..=n], &mut rn.y[1..=n]);
+        match opts.filter {
+            NormalFilter::Central => {
+                let (ml, mr) = (&mid[..n], &mid[2..]);
+                let (uc, dc) = (&up[1..=n], &down[1..=n]);
+                for i in 0..n {
+                    gx[i] = (mr[i] - ml[i]) * (0.5 * xs);
+                    gy[i] = (uc[i] - dc[i]) * (0.5 * ys);
+                }
+            }
+            NormalFilter::Sobel => {
+                let (ul, uc, ur) = (&up[..n], &up[1..=n], &up[2..]);
+                let (ml, mr) = (&mid[..n], &mid[2..]);
+                let (dl, dc, dr) = (&down[..n], &down[1..=n], &down[2..]);
+                for i in 0..n {
+                    gx[i] = ((ur[i] + 2.0 * mr[i] + dr[i]) - (ul[i] + 2.0 * ml[i] + dl[i])) * (0.125 * xs);
+                    gy[i] = ((ul[i] + 2.0 * uc[i] + ur[i]) - (dl[i] + 2.0 * dc[i] + dr[i])) * (0.125 * ys);
+                }
+            }
+        }
+    }
+}
+
+/// Turns the scaled slopes `(gx, gy)` in `rn.x`, `rn.y` into unit normals `nrm(gx, gy, 1)`.
+fn normalize_row(rn: &mut RowNormals) {
+    for ((x, y), z) in rn.x.iter_mut().zip(rn.y.iter_mut()).zip(rn.z.iter_mut()) {
+        let inv = 1.0 / (*x * *x + *y * *y + 1.0).sqrt();
+        *x *= inv;
+        *y *= inv;
+        *z = inv;
     }
 }
 
@@ -205,8 +301,20 @@ fn bake_row<T>(up: &[f32], mid: &[f32], down: &[f32], opts: &NormalBakeOptions, 
 #[inline]
 #[must_use]
 pub fn encode_rgb8(n: Vec3) -> [u8; 3] {
-    let q = |c: f32| ((c.clamp(-1.0, 1.0) * 0.5 + 0.5) * 255.0).round() as u8;
-    [q(n.x), q(n.y), q(n.z)]
+    [quantize_unit(n.x), quantize_unit(n.y), quantize_unit(n.z)]
+}
+
+/// `(c * 0.5 + 0.5) * 255` rounded to the nearest integer (ties to even), with `c` clamped to
+/// `[-1, 1]` (NaN gives 0).
+///
+/// Adding 1.5 * 2^23 leaves the rounded integer in the low mantissa bits: no float-to-int
+/// conversion, so the loops that call this vectorize.
+#[inline]
+#[must_use]
+pub fn quantize_unit(c: f32) -> u8 {
+    const MAGIC: f32 = 12_582_912.0;
+    let v = c.clamp(-1.0, 1.0) * 127.5 + 127.5;
+    (v + MAGIC).to_bits() as u8
 }
 
 /// Decodes an RGB8 normal (`c * 2 - 1`) and renormalizes it, as a shader does after filtering.
@@ -300,10 +408,16 @@ pub fn bake_packed_rgba8(
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<Vec<[u8; 4]>, BakeError> {
     let mut out = vec![[0u8; 4]; field.depths().len()];
-    bake_normals_into(field, opts, &mut out, |n| {
-        let [r, g, b] = encode_rgb8(n);
-        [r, g, b, 0]
-    }, progress)?;
+    bake_normals_into(
+        field,
+        opts,
+        &mut out,
+        |n| {
+            let [r, g, b] = encode_rgb8(n);
+            [r, g, b, 0]
+        },
+        progress,
+    )?;
     for (px, &d) in out.iter_mut().zip(field.depths()) {
         px[3] = ((1.0 - d) * 255.0).round() as u8;
     }
@@ -399,6 +513,23 @@ mod tests {
     }
 
     #[test]
+    fn fast_rgb8_path_gives_the_bytes_of_encode_rgb8() {
+        let f = HeightField::from_height_fn(37, 9, |x, y| ((x * 13 + y * 7) % 10) as f32 / 9.0);
+        for filter in [NormalFilter::Central, NormalFilter::Sobel] {
+            for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
+                let opts = NormalBakeOptions { scale: 6.0, filter, edges, y_down: edges == EdgeMode::Clamp };
+                let mut fast = vec![[0u8; 3]; 37 * 9];
+                bake_normals_rgb8(&f, &opts, &mut fast, &|_| {}).unwrap();
+                let slow: Vec<[u8; 3]> = (0..9)
+                    .flat_map(|y| (0..37).map(move |x| (x, y)))
+                    .map(|(x, y)| encode_rgb8(normal_at(&f, x, y, &opts)))
+                    .collect();
+                assert_eq!(fast, slow, "{filter:?} {edges:?}");
+            }
+        }
+    }
+
+    #[test]
     fn bad_options_and_tiny_fields_are_errors() {
         let f = HeightField::constant(4, 4, 0.5);
         let nan = NormalBakeOptions { scale: f32::NAN, ..Default::default() };
@@ -421,9 +552,10 @@ mod tests {
         // Quantisation to 1/255 of the [0,1] range is 2/255 in [-1,1]: half a step of error
         // per channel before renormalisation.
         let step = 1.0 / 127.5;
-        for (i, dir) in (0..200).map(|i| (i, i as f32 * 0.731)).map(|(i, t)| {
-            (i, Vec3::new(t.cos() * (i as f32 * 0.004), t.sin() * (i as f32 * 0.004), 1.0).normalize())
-        }) {
+        for (i, dir) in (0..200)
+            .map(|i| (i, i as f32 * 0.731))
+            .map(|(i, t)| (i, Vec3::new(t.cos() * (i as f32 * 0.004), t.sin() * (i as f32 * 0.004), 1.0).normalize()))
+        {
             let rgb = decode_rgb8(encode_rgb8(dir));
             assert!((rgb - dir).length() < 1.5 * step, "rgb8 {i}: {dir} -> {rgb}");
             let rg = decode_rg8(encode_rg8(dir));
@@ -523,7 +655,8 @@ mod tests {
         for filter in [NormalFilter::Central, NormalFilter::Sobel] {
             let opts = NormalBakeOptions { scale: 8.0, filter, ..Default::default() };
             // Through the RGB8 file encoding, as a renderer would read it.
-            let map: Vec<Vec3> = bake_normals(&f, &opts).unwrap().into_iter().map(|n| decode_rgb8(encode_rgb8(n))).collect();
+            let map: Vec<Vec3> =
+                bake_normals(&f, &opts).unwrap().into_iter().map(|n| decode_rgb8(encode_rgb8(n))).collect();
             let (t, b, nrm) = (Vec3::X, Vec3::Y, Vec3::Z);
             let shade = |x: u32, y: u32, light: Vec3| {
                 let m = map[(y * size + x) as usize];

@@ -436,7 +436,8 @@ mod tests {
     fn box_filter_preserves_the_mean_for_any_size() {
         for (w, h) in [(8, 8), (7, 5), (3, 1), (1, 9), (13, 6)] {
             let hf = HeightField::from_height_fn(w, h, |x, y| ((x * 37 + y * 11) % 17) as f32 / 16.0);
-            let mean = |f: &HeightField| f.depths().iter().map(|&d| f64::from(d)).sum::<f64>() / f.depths().len() as f64;
+            let mean =
+                |f: &HeightField| f.depths().iter().map(|&d| f64::from(d)).sum::<f64>() / f.depths().len() as f64;
             let chain = MipChain::new(hf.clone());
             assert_eq!(chain.level(chain.len() - 1).width(), 1);
             assert_eq!(chain.level(chain.len() - 1).height(), 1);

@@ -17,3 +17,4 @@ pub mod tangent;
 pub use glam;
 pub use heightfield::{EdgeMode, HeightField, HeightFieldError, MipChain, mip_level_from_gradients};
 pub use pyramid::MaxHeightPyramid;
+pub use tangent::{TangentError, TangentMethod, TangentOptions, compute_tangents, compute_vertex_normals};

@@ -160,7 +160,9 @@ mod tests {
 
     #[test]
     fn every_cell_bounds_the_surface_tightly() {
-        for (w, h, edges) in [(8, 8, EdgeMode::Wrap), (7, 5, EdgeMode::Clamp), (5, 9, EdgeMode::Wrap), (1, 3, EdgeMode::Clamp)] {
+        for (w, h, edges) in
+            [(8, 8, EdgeMode::Wrap), (7, 5, EdgeMode::Clamp), (5, 9, EdgeMode::Wrap), (1, 3, EdgeMode::Clamp)]
+        {
             let f = noisy(w, h, w * 31 + h);
             let p = MaxHeightPyramid::new(&f, edges);
             for level in 0..p.len() {
@@ -170,7 +172,10 @@ mod tests {
                         let ([x0, x1], [y0, y1]) = p.cell_texels(level, x, y);
                         let truth = brute_min_depth(&f, edges, x0, x1, y0, y1);
                         let bound = p.min_depth(level, x, y);
-                        assert!(bound <= truth + 1e-6, "{w}x{h} {edges:?} level {level} cell ({x},{y}): {bound} > {truth}");
+                        assert!(
+                            bound <= truth + 1e-6,
+                            "{w}x{h} {edges:?} level {level} cell ({x},{y}): {bound} > {truth}"
+                        );
                         assert!((bound - truth).abs() < 1e-5, "bound not tight: {bound} vs {truth}");
                     }
                 }

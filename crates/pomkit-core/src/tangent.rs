@@ -49,8 +49,9 @@ use thiserror::Error;
 pub enum TangentMethod {
     /// Mikkelsen's MikkTSpace, the tangent space that glTF 2.0 prescribes when a file carries
     /// no tangents and that common bakers use. Pick it when the normal map was baked by another
-    /// tool. It costs a few times as much as [`TangentMethod::Lengyel`] (the vertex welding and
-    /// grouping of the reference algorithm), and `weld_seams` does not apply to it.
+    /// tool. It costs roughly ten times as much as [`TangentMethod::Lengyel`] (0.6 s against
+    /// 0.05 s for a 262k-triangle sphere in a release build, one core), and `weld_seams` does
+    /// not apply to it.
     #[default]
     MikkTSpace,
     /// Lengyel's sum of per-triangle tangents (section 7.5, eq. 7.37 to 7.40), optionally welded
@@ -409,8 +410,8 @@ fn position_key(p: Vec3) -> [u32; 3] {
     p.to_array().map(|c| if c == 0.0 { 0 } else { c.to_bits() })
 }
 
-/// At most this many clusters per position are kept apart by seam welding; bounds the work
-/// on pathological meshes with thousands of vertices at one point.
+/// Seam welding forms at most this many clusters per position (later vertices that match none
+/// stay unwelded), which bounds the work on meshes with thousands of vertices at one point.
 const MAX_WELD_CLUSTERS: usize = 64;
 
 /// Seam welding (Lengyel 7.5): merges the sums of duplicated vertices whose frames have the

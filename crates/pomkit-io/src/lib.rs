@@ -198,9 +198,9 @@ pub fn load_height_field(path: &Path, opts: &HeightLoadOptions) -> Result<Height
 /// As [`load_height_field`].
 pub fn decode_height_field(bytes: &[u8], path: &Path, opts: &HeightLoadOptions) -> Result<HeightField, IoError> {
     let decode_err = |reason| IoError::Decode { path: path.to_owned(), reason };
-    let reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().map_err(|e| {
-        IoError::Read { path: path.to_owned(), reason: e }
-    })?;
+    let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| IoError::Read { path: path.to_owned(), reason: e })?;
     let img = reader.decode().map_err(decode_err)?;
     image_to_height_field(&img, path, opts)
 }
@@ -210,7 +210,11 @@ pub fn decode_height_field(bytes: &[u8], path: &Path, opts: &HeightLoadOptions) 
 /// # Errors
 /// [`IoError::Empty`], [`IoError::NoAlpha`], [`IoError::NotFinite`], [`IoError::OutOfRange`],
 /// [`IoError::UnsupportedPixels`].
-pub fn image_to_height_field(img: &DynamicImage, path: &Path, opts: &HeightLoadOptions) -> Result<HeightField, IoError> {
+pub fn image_to_height_field(
+    img: &DynamicImage,
+    path: &Path,
+    opts: &HeightLoadOptions,
+) -> Result<HeightField, IoError> {
     let (width, height) = (img.width(), img.height());
     if width == 0 || height == 0 {
         return Err(IoError::Empty { path: path.to_owned(), width, height });
@@ -244,9 +248,13 @@ pub fn image_to_height_field(img: &DynamicImage, path: &Path, opts: &HeightLoadO
                 pick([g, g, g, a])
             })
             .collect(),
-        DynamicImage::ImageRgb8(b) => b.pixels().map(|p| pick(p.0.map(|c| f32::from(c) / 255.0).into_rgba(1.0))).collect(),
+        DynamicImage::ImageRgb8(b) => {
+            b.pixels().map(|p| pick(p.0.map(|c| f32::from(c) / 255.0).into_rgba(1.0))).collect()
+        }
         DynamicImage::ImageRgba8(b) => b.pixels().map(|p| pick(p.0.map(|c| f32::from(c) / 255.0))).collect(),
-        DynamicImage::ImageRgb16(b) => b.pixels().map(|p| pick(p.0.map(|c| f32::from(c) / 65535.0).into_rgba(1.0))).collect(),
+        DynamicImage::ImageRgb16(b) => {
+            b.pixels().map(|p| pick(p.0.map(|c| f32::from(c) / 65535.0).into_rgba(1.0))).collect()
+        }
         DynamicImage::ImageRgba16(b) => b.pixels().map(|p| pick(p.0.map(|c| f32::from(c) / 65535.0))).collect(),
         DynamicImage::ImageRgb32F(b) => b.pixels().map(|p| pick(p.0.into_rgba(1.0))).collect(),
         DynamicImage::ImageRgba32F(b) => b.pixels().map(|p| pick(p.0)).collect(),
@@ -372,7 +380,13 @@ pub enum Pixels<'a> {
 /// # Panics
 /// If the sample count does not equal `width * height * channels`, or the sample type does
 /// not fit the layout (a programming error, not bad input).
-pub fn write_image(path: &Path, width: u32, height: u32, layout: PixelLayout, pixels: Pixels<'_>) -> Result<(), IoError> {
+pub fn write_image(
+    path: &Path,
+    width: u32,
+    height: u32,
+    layout: PixelLayout,
+    pixels: Pixels<'_>,
+) -> Result<(), IoError> {
     check_output(path, layout)?;
     let want_exr = layout.is_float();
     let n = width as usize * height as usize * layout.channels();
@@ -458,7 +472,16 @@ pub fn write_atomically(
         let msg = format!("its folder {} does not exist", dir.display());
         return Err(write_err(std::io::Error::new(std::io::ErrorKind::NotFound, msg)));
     }
-    let mut tmp = tempfile::Builder::new().prefix(".pomkit-").suffix(".tmp").tempfile_in(&dir).map_err(write_err)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".pomkit-").suffix(".tmp");
+    // Temporary files are private (0600) by default; outputs get ordinary permissions, as if
+    // created by a plain open (the umask still applies).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(&dir).map_err(write_err)?;
     body(tmp.as_file_mut()).map_err(|e| match e {
         WriteFail::Io(reason) => IoError::Write { path: path.to_owned(), reason },
         WriteFail::Encode(reason) => IoError::Encode { path: path.to_owned(), reason },
@@ -542,11 +565,15 @@ mod tests {
         let err = decode_height_field(cut, Path::new("cut.png"), &HeightLoadOptions::default()).unwrap_err();
         assert!(matches!(err, IoError::Decode { .. }), "{err}");
         assert!(err.to_string().contains("cut.png"));
-        let err = decode_height_field(b"not an image", Path::new("notes.txt"), &HeightLoadOptions::default()).unwrap_err();
+        let err =
+            decode_height_field(b"not an image", Path::new("notes.txt"), &HeightLoadOptions::default()).unwrap_err();
         assert!(err.to_string().contains("notes.txt"), "{err}");
         let err = load_height_field(Path::new("/nonexistent/h.png"), &HeightLoadOptions::default()).unwrap_err();
         assert!(matches!(err, IoError::Read { .. }));
-        assert_eq!("x".parse::<Channel>().unwrap_err().to_string(), "unknown channel 'x': expected one of r, g, b, a, luma");
+        assert_eq!(
+            "x".parse::<Channel>().unwrap_err().to_string(),
+            "unknown channel 'x': expected one of r, g, b, a, luma"
+        );
         assert_eq!("A".parse::<Channel>().unwrap(), Channel::A);
     }
 
@@ -556,6 +583,13 @@ mod tests {
         let ok = dir.path().join("n.png");
         write_image(&ok, 2, 1, PixelLayout::Rgb8, Pixels::U8(&[1, 2, 3, 4, 5, 6])).unwrap();
         let back = image::open(&ok).unwrap().to_rgb8();
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&ok).unwrap().permissions().mode();
+            assert!(mode & 0o044 != 0 || mode & 0o600 == 0o600, "outputs are not private temp files: {mode:o}");
+            assert_ne!(mode & 0o777, 0o600, "permissions of the temporary file leaked: {mode:o}");
+        }
         assert_eq!(back.as_raw(), &[1, 2, 3, 4, 5, 6]);
         let err = write_image(&dir.path().join("n.jpg"), 1, 1, PixelLayout::Rgb8, Pixels::U8(&[0, 0, 0])).unwrap_err();
         assert!(matches!(err, IoError::UnsupportedOutput { .. }), "{err}");
