@@ -2,7 +2,11 @@
 //! pomkit-io, and reports. The flag names and formats are stable (DESIGN section 5).
 
 mod bake;
+mod compare;
+mod output;
 mod progress;
+mod technique;
+mod trace;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -28,9 +32,13 @@ enum Verb {
     Bake(bake::BakeVerb),
     /// Write one of the built-in procedural height maps (and optionally its colour map).
     Generate(GenerateArgs),
+    /// Trace rays read from a CSV file with one technique; write where they hit.
+    Trace(trace::TraceArgs),
+    /// The accuracy table: each technique's error against `exact`, and its fetches, per view angle.
+    Compare(compare::CompareArgs),
 }
 
-/// Where a height map comes from and how to read it: shared by every verb that reads one.
+/// Where a height map comes from and how to read it, as a positional `IN` (the `bake` verbs).
 #[derive(Args, Debug, Clone)]
 struct HeightInput {
     /// Height map: an image file (PNG, JPEG, TIFF, EXR; 8/16-bit or float), or `builtin:NAME`
@@ -38,6 +46,25 @@ struct HeightInput {
     /// sized as `builtin:NAME:WxH` (default 512x512).
     #[arg(value_name = "IN")]
     input: String,
+    #[command(flatten)]
+    read: HeightRead,
+}
+
+/// Where a height map comes from and how to read it, as `--height H` (`trace`, `compare`).
+#[derive(Args, Debug, Clone)]
+pub(crate) struct HeightOption {
+    /// Height map: an image file (PNG, JPEG, TIFF, EXR; 8/16-bit or float), or `builtin:NAME`
+    /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves), optionally
+    /// sized as `builtin:NAME:WxH` (default 512x512).
+    #[arg(long = "height", value_name = "H")]
+    pub(crate) input: String,
+    #[command(flatten)]
+    read: HeightRead,
+}
+
+/// How to read a height map: shared by every verb that reads one.
+#[derive(Args, Debug, Clone)]
+struct HeightRead {
     /// The image stores depth (white = deep) instead of height (white = high).
     #[arg(long)]
     depth_map: bool,
@@ -74,24 +101,35 @@ impl From<ChannelArg> for Channel {
 impl HeightInput {
     /// Loads the height field this input names.
     fn load(&self) -> Result<HeightField> {
-        if let Some(spec) = self.input.strip_prefix("builtin:") {
-            let (name, size) = spec.split_once(':').unwrap_or((spec, "512x512"));
-            let pattern: Pattern = name.parse().with_context(|| format!("input {}", self.input))?;
-            let (w, h) = parse_size(size).with_context(|| format!("input {}", self.input))?;
-            let field = progress::spinner(u64::from(w) * u64::from(h), &format!("generating {name} {w}x{h}"), || {
-                procedural::generate(pattern, w, h)
-            });
-            return Ok(if self.depth_map {
-                // The builtin is a height map; read as depth it is inverted, as a file would be.
-                HeightField::from_depths(w, h, field.heights()).context("inverting builtin")?
-            } else {
-                field
-            });
-        }
-        let opts =
-            HeightLoadOptions { depth_map: self.depth_map, channel: self.channel.into(), normalize: self.normalize };
-        Ok(pomkit_io::load_height_field(&PathBuf::from(&self.input), &opts)?)
+        load_height(&self.input, &self.read)
     }
+}
+
+impl HeightOption {
+    /// Loads the height field this option names.
+    pub(crate) fn load(&self) -> Result<HeightField> {
+        load_height(&self.input, &self.read)
+    }
+}
+
+/// Loads the height field `input` names (a file or `builtin:NAME[:WxH]`), read as `read` says.
+fn load_height(input: &str, read: &HeightRead) -> Result<HeightField> {
+    if let Some(spec) = input.strip_prefix("builtin:") {
+        let (name, size) = spec.split_once(':').unwrap_or((spec, "512x512"));
+        let pattern: Pattern = name.parse().with_context(|| format!("input {input}"))?;
+        let (w, h) = parse_size(size).with_context(|| format!("input {input}"))?;
+        let field = progress::spinner(u64::from(w) * u64::from(h), &format!("generating {name} {w}x{h}"), || {
+            procedural::generate(pattern, w, h)
+        });
+        return Ok(if read.depth_map {
+            // The builtin is a height map; read as depth it is inverted, as a file would be.
+            HeightField::from_depths(w, h, field.heights()).context("inverting builtin")?
+        } else {
+            field
+        });
+    }
+    let opts = HeightLoadOptions { depth_map: read.depth_map, channel: read.channel.into(), normalize: read.normalize };
+    Ok(pomkit_io::load_height_field(&PathBuf::from(input), &opts)?)
 }
 
 /// Parses `WxH` with both sides in 1..=16384.
@@ -145,6 +183,8 @@ fn main() -> ExitCode {
     let result = match &cli.verb {
         Verb::Bake(verb) => bake::run(verb),
         Verb::Generate(args) => generate(args),
+        Verb::Trace(args) => trace::run(args),
+        Verb::Compare(args) => compare::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -35,3 +35,16 @@ pub fn spinner<T>(texels: u64, what: &str, work: impl FnOnce() -> T) -> T {
     pb.finish_and_clear();
     out
 }
+
+/// A bar over `total` items named `unit` (rays...), hidden below `min_total` items (and, by
+/// indicatif, when stderr is not a terminal).
+pub fn items(total: u64, min_total: u64, what: &str, unit: &str) -> ProgressBar {
+    if total < min_total {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(total);
+    let template = format!("{{msg:>10}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{eta}} left");
+    pb.set_style(ProgressStyle::with_template(&template).expect("valid template").progress_chars("=> "));
+    pb.set_message(what.to_owned());
+    pb
+}

@@ -1,0 +1,203 @@
+//! `pomkit compare`: the accuracy table (DESIGN section 5): each technique's error against
+//! `exact` and its fetches per ray, per view angle, on a fixed random set of rays.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use clap::{Args, ValueEnum};
+use pomkit_core::accuracy::{self, AccuracyRow, DEFAULT_SEED};
+use pomkit_core::trace::Surface;
+
+use crate::technique::{self, TechniqueArgs};
+use crate::{HeightOption, output, progress};
+
+/// The CSV header (and the JSON keys) of the table.
+pub const CSV_HEADER: &str = "technique,angle,rays,mean_error,p95_error,share_over_1,mean_fetches,max_fetches";
+
+/// Most rays per angle accepted (memory grows with rays x techniques).
+const MAX_RAYS: usize = 1_000_000;
+/// Fewer rays in all than this finish in about a second: no bar.
+const MIN_RAYS_FOR_BAR: u64 = 100_000;
+
+#[derive(Args, Debug)]
+#[command(after_long_help = "\
+Error is the distance in texels between a technique's hit and the exact hit (the first \
+intersection with the bilinear surface of the mip-0 texels) for the same ray. Each angle traces \
+the same entry points and azimuths (uniformly random in the tile, from --seed), so the table is \
+reproducible. A row for `exact` is always included (error 0 by definition; its fetches are the \
+reference cost).
+
+Formats: md, a Markdown table grouped by angle (numbers rounded); csv, with the header \
+`technique,angle,rays,mean_error,p95_error,share_over_1,mean_fetches,max_fetches` and full \
+precision; json, an array of objects with those keys. share_over_1 is a fraction in [0, 1]; \
+p95_error is the nearest-rank 95th percentile.")]
+pub struct CompareArgs {
+    #[command(flatten)]
+    height: HeightOption,
+    /// How far below the surface, in UV units, the deepest point lies (Bevy's
+    /// parallax_depth_scale).
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true, value_name = "S")]
+    depth_scale: f32,
+    /// View angles from the normal, in degrees, comma-separated, each in [0, 90).
+    #[arg(long, default_value = "0,30,60,75,85", allow_hyphen_values = true, value_name = "DEG,..")]
+    angles: String,
+    /// `all`, or techniques separated by commas (flat, normal, parallax, iterative, steep,
+    /// pom-classic, pom, relief, exact).
+    #[arg(long, default_value = "all", value_name = "T,..")]
+    techniques: String,
+    /// Rays per angle (1 to 1000000). More rays give steadier statistics and take longer.
+    #[arg(long, default_value_t = 2000, value_name = "N")]
+    rays: usize,
+    /// Seed of the random rays: the same seed gives the same table.
+    #[arg(long, default_value_t = DEFAULT_SEED, value_name = "N")]
+    seed: u64,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = Format::Md)]
+    format: Format,
+    /// Write the table here (atomically) instead of standard output; `-` is standard output.
+    #[arg(short, long, value_name = "FILE")]
+    output: Option<PathBuf>,
+    #[command(flatten)]
+    options: TechniqueArgs,
+}
+
+/// Output formats of the table.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// A Markdown table for people.
+    Md,
+    /// CSV, full precision.
+    Csv,
+    /// A JSON array of objects, full precision.
+    Json,
+}
+
+pub fn run(a: &CompareArgs) -> Result<()> {
+    let params = a.options.params(a.depth_scale)?;
+    let angles = parse_angles(&a.angles)?;
+    let techniques = technique::parse_list(&a.techniques)?;
+    if !(1..=MAX_RAYS).contains(&a.rays) {
+        bail!("--rays {}: give between 1 and {MAX_RAYS} rays per angle", a.rays);
+    }
+    let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
+    output::check_writable(&out)?;
+    let field = a.height.load()?;
+    let (w, h) = (field.width(), field.height());
+    let surface = Surface::new(field, params.edges, params.depth_scale);
+    let pb = progress::items((angles.len() * a.rays) as u64, MIN_RAYS_FOR_BAR, "comparing", "rays");
+    let rows = accuracy::compare(&surface, &techniques, &angles, &params, a.rays, a.seed, &|n| pb.inc(n as u64));
+    pb.finish_and_clear();
+    let edges = format!("{:?}", params.edges).to_lowercase();
+    let caption = format!(
+        "Error in texels against `exact` on {} ({w}x{h}, depth scale {}, {edges} edges), {} rays per angle, seed {}.",
+        a.height.input, params.depth_scale, a.rays, a.seed
+    );
+    output::write_text(&out, |wr| match a.format {
+        Format::Md => write_md(wr, &caption, &rows),
+        Format::Csv => write_csv(wr, &rows),
+        Format::Json => write_json(wr, &rows),
+    })?;
+    if !output::is_stdout(&out) {
+        eprintln!("wrote {} ({} rows)", out.display(), rows.len());
+    }
+    Ok(())
+}
+
+/// Parses `--angles`: comma-separated degrees in [0, 90), duplicates dropped, order kept.
+fn parse_angles(s: &str) -> Result<Vec<f32>> {
+    let mut angles = Vec::new();
+    for part in s.split(',') {
+        let t = part.trim();
+        let Ok(a) = t.parse::<f32>() else {
+            bail!("--angles '{s}': '{t}' is not a number of degrees");
+        };
+        if !(a.is_finite() && (0.0..90.0).contains(&a)) {
+            bail!("--angles '{s}': {t} is outside [0, 90): angles are degrees from the normal, below grazing");
+        }
+        if !angles.contains(&a) {
+            angles.push(a);
+        }
+    }
+    Ok(angles)
+}
+
+/// A number for people: three decimals below 10, fewer above.
+fn round(x: f64) -> String {
+    if x.abs() < 10.0 {
+        format!("{x:.3}")
+    } else if x.abs() < 100.0 {
+        format!("{x:.2}")
+    } else {
+        format!("{x:.1}")
+    }
+}
+
+fn write_md(w: &mut dyn Write, caption: &str, rows: &[AccuracyRow]) -> std::io::Result<()> {
+    writeln!(w, "{caption}")?;
+    writeln!(w)?;
+    writeln!(w, "| technique | angle | mean error (texels) | p95 | share > 1 texel | mean fetches | max fetches |")?;
+    writeln!(w, "|---|--:|--:|--:|--:|--:|--:|")?;
+    for r in rows {
+        writeln!(
+            w,
+            "| {} | {}° | {} | {} | {:.1}% | {:.1} | {} |",
+            r.technique,
+            r.angle_deg,
+            round(r.mean_error),
+            round(r.p95_error),
+            r.share_over_1 * 100.0,
+            r.mean_fetches,
+            r.max_fetches
+        )?;
+    }
+    Ok(())
+}
+
+fn write_csv(w: &mut dyn Write, rows: &[AccuracyRow]) -> std::io::Result<()> {
+    writeln!(w, "{CSV_HEADER}")?;
+    for r in rows {
+        writeln!(
+            w,
+            "{},{},{},{},{},{},{},{}",
+            r.technique,
+            r.angle_deg,
+            r.rays,
+            num(r.mean_error),
+            num(r.p95_error),
+            num(r.share_over_1),
+            num(r.mean_fetches),
+            r.max_fetches
+        )?;
+    }
+    Ok(())
+}
+
+/// A JSON number: Rust's shortest round-trip decimal (never exponent notation); `null` for a
+/// non-finite value, which the statistics never produce.
+fn num(x: f64) -> String {
+    if x.is_finite() { format!("{x}") } else { "null".to_owned() }
+}
+
+fn write_json(w: &mut dyn Write, rows: &[AccuracyRow]) -> std::io::Result<()> {
+    writeln!(w, "[")?;
+    for (i, r) in rows.iter().enumerate() {
+        // Technique names are plain ASCII words with hyphens: no escaping needed.
+        write!(
+            w,
+            "  {{\"technique\": \"{}\", \"angle\": {}, \"rays\": {}, \"mean_error\": {}, \"p95_error\": {}, \
+             \"share_over_1\": {}, \"mean_fetches\": {}, \"max_fetches\": {}}}",
+            r.technique,
+            r.angle_deg,
+            r.rays,
+            num(r.mean_error),
+            num(r.p95_error),
+            num(r.share_over_1),
+            num(r.mean_fetches),
+            r.max_fetches
+        )?;
+        writeln!(w, "{}", if i + 1 < rows.len() { "," } else { "" })?;
+    }
+    writeln!(w, "]")?;
+    Ok(())
+}

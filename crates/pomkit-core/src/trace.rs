@@ -1,0 +1,849 @@
+//! Tracing: where does a ray entering a height-mapped polygon meet the displaced surface?
+//!
+//! Every technique of DESIGN section 3 is a pure function of (surface, ray, parameters) that
+//! returns a [`Hit`] and counts its height fetches. The renderers call these functions per pixel
+//! (the GPU calls their WGSL twins).
+//!
+//! # The ray
+//! A [`Ray`] enters the polygon at `uv` with direction `(du, dv, dz)`: along +u, +v and along the
+//! tangent-space normal, so `dz < 0` points into the surface. Depth `z` in `[0, 1]` is reached at
+//! `uv + z * depth_scale * (du, dv) / -dz` (DESIGN section 2). Directions need not be unit length.
+//! Rays with `dz >= 0` do not enter the surface: every technique returns the entry point, depth 0,
+//! with no fetch. Rays flatter than [`MIN_COS`] are steepened to it (about 89.94 degrees from the
+//! normal) so that every trace is finite.
+//!
+//! # Error
+//! "Error" is the distance in texels between a technique's hit UV and the [`Technique::Exact`]
+//! hit UV for the same ray. Hit UVs are not wrapped into `[0, 1]`: with wrapping edges a long
+//! grazing ray can travel several tiles, and the error is measured along the ray.
+
+use glam::{DVec2, DVec3, Vec2, Vec3};
+
+use crate::bake::{NormalBakeOptions, NormalFilter, bake_normals};
+use crate::heightfield::{EdgeMode, HeightField, MipChain};
+use crate::pyramid::MaxHeightPyramid;
+
+/// The flattest ray accepted, as `-dz` of the unit direction; flatter rays are steepened to it.
+pub const MIN_COS: f32 = 1e-3;
+
+/// The most samples any technique takes in one trace; larger requests are clamped (DESIGN
+/// section 6, "huge sample counts").
+pub const MAX_SAMPLES: u32 = 1024;
+
+/// A ray entering the polygon.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    /// Entry point in UV.
+    pub uv: Vec2,
+    /// Direction of travel `(du, dv, dz)`; `dz < 0` enters the surface.
+    pub dir: Vec3,
+}
+
+impl Ray {
+    /// A ray from `uv` with direction `dir`.
+    #[must_use]
+    pub fn new(uv: Vec2, dir: Vec3) -> Self {
+        Self { uv, dir }
+    }
+
+    /// The ray seen at `angle` radians from the normal, travelling along azimuth `azimuth`
+    /// radians in the UV plane (0 = +u).
+    #[must_use]
+    pub fn at_angle(uv: Vec2, angle: f32, azimuth: f32) -> Self {
+        let (s, c) = angle.sin_cos();
+        Self { uv, dir: Vec3::new(s * azimuth.cos(), s * azimuth.sin(), -c) }
+    }
+}
+
+/// Where a technique says the ray meets the surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Hit point in UV (not wrapped).
+    pub uv: Vec2,
+    /// Depth of the hit point on the ray, in `[0, 1]`.
+    pub depth: f32,
+    /// Height fetches made (DESIGN section 2: a filtered sample, a gather or a pyramid texel
+    /// read each count 1).
+    pub fetches: u32,
+}
+
+/// The tracing techniques of DESIGN section 3.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Technique {
+    /// Plain texturing: no offset, geometric normal. 0 fetches.
+    Flat,
+    /// Normal mapping only: no offset. 0 fetches.
+    Normal,
+    /// One-sample parallax (Kaneko 2001) with Welsh's offset limiting: the offset is
+    /// `d * depth_scale * (du, dv)` for a unit direction, never longer than the depth itself.
+    /// 1 fetch. Swims and flattens at grazing angles.
+    Parallax,
+    /// Lengyel's iterative parallax (Listing 7.9) on a parallax map `n_z * d`: `k` steps of a
+    /// `1/k` share of the locally estimated offset. `k` fetches. Better on slopes, still no
+    /// occlusion.
+    Iterative,
+    /// Steep parallax (McGuire 2005): `n` depth planes, the first plane below the height field.
+    /// At most `n` fetches. Stair-steps between planes.
+    Steep,
+    /// Brawley & Tatarchuk 2004: the parallax vector scaled by the perspective bias, 8 fixed
+    /// samples, line-line intersection. 8 fetches. Misses features thinner than 1/8 of the trace.
+    PomClassic,
+    /// Zink / Tatarchuk 2006: between `n_min` and `n_max` samples (more at grazing angles),
+    /// early exit, piecewise-linear intersection, optional secant refinement. At most
+    /// `n_max + 1 + refine` fetches.
+    Pom,
+    /// Relief mapping (Policarpo 2005): linear search then `k` binary steps. At most
+    /// `n + k` fetches.
+    Relief,
+    /// The exact first intersection with the bilinear surface of the mip-0 texels, by
+    /// maximum-height pyramid traversal. Never misses a feature; O(log size) fetches typically.
+    Exact,
+}
+
+impl Technique {
+    /// Every technique, cheapest first.
+    pub const ALL: [Technique; 9] = [
+        Technique::Flat,
+        Technique::Normal,
+        Technique::Parallax,
+        Technique::Iterative,
+        Technique::Steep,
+        Technique::PomClassic,
+        Technique::Pom,
+        Technique::Relief,
+        Technique::Exact,
+    ];
+
+    /// The name used by the command line and scene files.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Technique::Flat => "flat",
+            Technique::Normal => "normal",
+            Technique::Parallax => "parallax",
+            Technique::Iterative => "iterative",
+            Technique::Steep => "steep",
+            Technique::PomClassic => "pom-classic",
+            Technique::Pom => "pom",
+            Technique::Relief => "relief",
+            Technique::Exact => "exact",
+        }
+    }
+
+    /// Whether the technique displaces the texture coordinate at all.
+    #[must_use]
+    pub const fn displaces(self) -> bool {
+        !matches!(self, Technique::Flat | Technique::Normal)
+    }
+
+    /// The most fetches one view trace may take with `params` (the bound the tests check).
+    #[must_use]
+    pub fn fetch_bound(self, params: &TraceParams, surface: &Surface) -> u32 {
+        let p = params.sanitized();
+        match self {
+            Technique::Flat | Technique::Normal => 0,
+            Technique::Parallax => 1,
+            Technique::Iterative => p.iterations,
+            Technique::Steep => p.samples,
+            Technique::PomClassic => 8,
+            Technique::Pom => p.max_samples + 1 + p.refine,
+            Technique::Relief => p.samples + p.binary_steps,
+            Technique::Exact => surface.exact_fetch_cap(),
+        }
+    }
+}
+
+impl std::fmt::Display for Technique {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A technique name that pomkit does not know.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownTechnique(pub String);
+
+impl std::fmt::Display for UnknownTechnique {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let names: Vec<&str> = Technique::ALL.iter().map(|t| t.name()).collect();
+        write!(f, "unknown technique '{}': expected one of {}", self.0, names.join(", "))
+    }
+}
+
+impl std::error::Error for UnknownTechnique {}
+
+impl std::str::FromStr for Technique {
+    type Err = UnknownTechnique;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let t = s.trim();
+        Technique::ALL
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(t))
+            .ok_or_else(|| UnknownTechnique(s.to_owned()))
+    }
+}
+
+/// Parameters shared by the techniques (the command line's technique options).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TraceParams {
+    /// How far below the surface, in UV units, the deepest point lies. Default 0.1.
+    pub depth_scale: f32,
+    /// `pom`: fewest samples (head-on). Default 8.
+    pub min_samples: u32,
+    /// `pom`: most samples (grazing). Default 32.
+    pub max_samples: u32,
+    /// `steep` and `relief`'s linear search: depth planes. Default 32.
+    pub samples: u32,
+    /// `iterative`: parallax steps k. Default 4 (Lengyel's listing).
+    pub iterations: u32,
+    /// `relief`: binary refinement steps. Default 6.
+    pub binary_steps: u32,
+    /// `pom`: secant refinement steps after the linear search (Unity HDRP style). Default 0.
+    pub refine: u32,
+    /// `pom-classic`: Brawley's perspective bias. 1 gives the exact parallax length; smaller
+    /// values shorten the trace toward grazing angles (less shimmer, flatter relief). Default 1.
+    pub perspective_bias: f32,
+    /// Edge mode to build the [`Surface`] with (default wrap). Tracing itself samples with the
+    /// surface's own mode, which [`Surface::new`] fixes; keep the two equal.
+    pub edges: EdgeMode,
+    /// Mip level the sampling techniques read (fixed before the loop, from UV gradients).
+    /// `exact` always works on mip 0. Default 0.
+    pub lod: f32,
+}
+
+impl Default for TraceParams {
+    fn default() -> Self {
+        Self {
+            depth_scale: 0.1,
+            min_samples: 8,
+            max_samples: 32,
+            samples: 32,
+            iterations: 4,
+            binary_steps: 6,
+            refine: 0,
+            perspective_bias: 1.0,
+            edges: EdgeMode::Wrap,
+            lod: 0.0,
+        }
+    }
+}
+
+/// Why trace parameters were refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TraceParamError {
+    /// `depth_scale` is NaN, infinite, zero or negative.
+    #[error("depth_scale is {0}: it must be a finite number greater than 0")]
+    DepthScale(f32),
+    /// `perspective_bias` is NaN or infinite.
+    #[error("perspective_bias is {0}: it must be a finite number")]
+    PerspectiveBias(f32),
+    /// `lod` is NaN or infinite.
+    #[error("lod is {0}: it must be a finite number")]
+    Lod(f32),
+    /// `min_samples` exceeds `max_samples`.
+    #[error("min_samples ({min}) exceeds max_samples ({max})")]
+    SampleBounds {
+        /// The minimum.
+        min: u32,
+        /// The maximum.
+        max: u32,
+    },
+}
+
+impl TraceParams {
+    /// Checks the parameters.
+    ///
+    /// # Errors
+    /// [`TraceParamError`] for a non-positive or non-finite depth scale, a non-finite bias or
+    /// LOD, or `min_samples > max_samples`. Sample counts above [`MAX_SAMPLES`] and of zero are
+    /// not errors: they are clamped to `1..=MAX_SAMPLES`.
+    pub fn validate(&self) -> Result<(), TraceParamError> {
+        if !(self.depth_scale.is_finite() && self.depth_scale > 0.0) {
+            return Err(TraceParamError::DepthScale(self.depth_scale));
+        }
+        if !self.perspective_bias.is_finite() {
+            return Err(TraceParamError::PerspectiveBias(self.perspective_bias));
+        }
+        if !self.lod.is_finite() {
+            return Err(TraceParamError::Lod(self.lod));
+        }
+        if self.min_samples > self.max_samples {
+            return Err(TraceParamError::SampleBounds { min: self.min_samples, max: self.max_samples });
+        }
+        Ok(())
+    }
+
+    /// The parameters with counts clamped to `1..=MAX_SAMPLES` (refine and binary steps to
+    /// `0..=64`) and non-finite values replaced by defaults, so tracing never hangs or panics.
+    #[must_use]
+    pub fn sanitized(&self) -> Self {
+        let d = Self::default();
+        let c = |n: u32| n.clamp(1, MAX_SAMPLES);
+        let max_samples = c(self.max_samples);
+        Self {
+            depth_scale: if self.depth_scale.is_finite() && self.depth_scale > 0.0 {
+                self.depth_scale
+            } else {
+                d.depth_scale
+            },
+            min_samples: c(self.min_samples).min(max_samples),
+            max_samples,
+            samples: c(self.samples),
+            iterations: c(self.iterations),
+            binary_steps: self.binary_steps.min(64),
+            refine: self.refine.min(64),
+            perspective_bias: if self.perspective_bias.is_finite() {
+                self.perspective_bias
+            } else {
+                d.perspective_bias
+            },
+            edges: self.edges,
+            lod: if self.lod.is_finite() { self.lod.max(0.0) } else { 0.0 },
+        }
+    }
+}
+
+/// A height field prepared for tracing: its mip chain, its maximum-height pyramid and the
+/// parallax map `n_z * d` used by [`Technique::Iterative`].
+#[derive(Clone, Debug)]
+pub struct Surface {
+    mips: MipChain,
+    pyramid: MaxHeightPyramid,
+    parallax: MipChain,
+    edges: EdgeMode,
+    depth_scale: f32,
+}
+
+impl Surface {
+    /// Prepares `field` for tracing with the given edge mode and depth scale (the parallax map
+    /// depends on the depth scale through its normals: the full depth spans
+    /// `depth_scale * width` texels).
+    #[must_use]
+    pub fn new(field: HeightField, edges: EdgeMode, depth_scale: f32) -> Self {
+        let pyramid = MaxHeightPyramid::new(&field, edges);
+        let scale = if depth_scale.is_finite() && depth_scale > 0.0 { depth_scale } else { 0.1 };
+        let parallax = if field.width() >= 2 && field.height() >= 2 {
+            let opts = NormalBakeOptions {
+                scale: scale * field.width() as f32,
+                filter: NormalFilter::Central,
+                edges,
+                y_down: false,
+            };
+            let normals = bake_normals(&field, &opts).unwrap_or_else(|_| vec![Vec3::Z; field.depths().len()]);
+            let values: Vec<f32> =
+                normals.iter().zip(field.depths()).map(|(n, &d)| (n.z * d).clamp(0.0, 1.0)).collect();
+            HeightField::from_depths(field.width(), field.height(), values).unwrap_or_else(|_| field.clone())
+        } else {
+            field.clone()
+        };
+        Self { mips: MipChain::new(field), pyramid, parallax: MipChain::new(parallax), edges, depth_scale: scale }
+    }
+
+    /// The height field (mip 0).
+    #[must_use]
+    pub fn field(&self) -> &HeightField {
+        self.mips.base()
+    }
+
+    /// The mip chain.
+    #[must_use]
+    pub fn mips(&self) -> &MipChain {
+        &self.mips
+    }
+
+    /// The maximum-height pyramid.
+    #[must_use]
+    pub fn pyramid(&self) -> &MaxHeightPyramid {
+        &self.pyramid
+    }
+
+    /// The edge mode the surface was prepared for.
+    #[must_use]
+    pub fn edges(&self) -> EdgeMode {
+        self.edges
+    }
+
+    /// The depth scale the parallax map was built for.
+    #[must_use]
+    pub fn depth_scale(&self) -> f32 {
+        self.depth_scale
+    }
+
+    /// Filtered depth at `uv` and mip level `lod` (one fetch).
+    #[must_use]
+    pub fn depth(&self, uv: Vec2, lod: f32) -> f32 {
+        self.mips.sample(uv, lod, self.edges)
+    }
+
+    /// A generous cap on the exact tracer's steps: it stops there (and reports the point it
+    /// reached) rather than loop forever on input no test has foreseen.
+    #[must_use]
+    pub fn exact_fetch_cap(&self) -> u32 {
+        let f = self.field();
+        let span = (f.width() + f.height()) as u64 * (self.pyramid.len() as u64 + 2) * 64;
+        span.min(u64::from(u32::MAX / 2)) as u32 + 4096
+    }
+}
+
+/// The UV offset per unit depth along `dir` (unit, `dz < 0`): `depth_scale * (du, dv) / -dz`.
+fn uv_per_depth(dir: Vec3, depth_scale: f32) -> Vec2 {
+    Vec2::new(dir.x, dir.y) * (depth_scale / -dir.z)
+}
+
+/// Normalizes `dir` and steepens it to [`MIN_COS`]; `None` for rays that do not enter
+/// (`dz >= 0`) or are not finite.
+fn entering(dir: Vec3) -> Option<Vec3> {
+    if !dir.is_finite() {
+        return None;
+    }
+    let d = dir.try_normalize()?;
+    if d.z >= 0.0 {
+        return None;
+    }
+    if -d.z >= MIN_COS {
+        return Some(d);
+    }
+    let xy = Vec2::new(d.x, d.y).normalize_or_zero() * (1.0 - MIN_COS * MIN_COS).sqrt();
+    Some(Vec3::new(xy.x, xy.y, -MIN_COS))
+}
+
+/// Traces `ray` into `surface` with `technique`.
+///
+/// Parameters are [`TraceParams::sanitized`] first, so any input gives a finite hit; validate
+/// them with [`TraceParams::validate`] to report bad input instead. `params.depth_scale` and
+/// `params.edges` should match the surface's (`iterative`'s parallax map uses the surface's).
+#[must_use]
+pub fn trace(surface: &Surface, ray: &Ray, technique: Technique, params: &TraceParams) -> Hit {
+    let p = params.sanitized();
+    let uv0 = if ray.uv.is_finite() { ray.uv } else { Vec2::ZERO };
+    let none = Hit { uv: uv0, depth: 0.0, fetches: 0 };
+    let Some(dir) = entering(ray.dir) else { return none };
+    let s = uv_per_depth(dir, p.depth_scale);
+    let at = |z: f32| uv0 + s * z;
+    match technique {
+        Technique::Flat | Technique::Normal => none,
+        Technique::Parallax => {
+            // Kaneko's offset d * ds * V.xy / V.z, limited (Welsh 2004) by dropping the division:
+            // the shift never exceeds the sampled depth times the depth scale.
+            let d = surface.depth(uv0, p.lod);
+            let offset = Vec2::new(dir.x, dir.y) * (d * p.depth_scale);
+            hit_on_ray(uv0, s, offset, d * -dir.z, 1)
+        }
+        Technique::Iterative => {
+            // Lengyel Listing 7.9 in pomkit's depth convention: the polygon is the top, so the
+            // map holds n_z * d (no signed remap) and every step moves away from the viewer.
+            let k = p.iterations;
+            let step = Vec2::new(dir.x, dir.y) * (p.depth_scale / k as f32);
+            let mut uv = uv0;
+            let mut sum = 0.0;
+            for _ in 0..k {
+                let value = surface.parallax.sample(uv, p.lod, surface.edges);
+                sum += value;
+                uv += step * value;
+            }
+            hit_on_ray(uv0, s, uv - uv0, sum / k as f32 * -dir.z, k)
+        }
+        Technique::Steep => {
+            // McGuire 2005: march depth planes 0, 1/n, ... until the surface is at or above the
+            // plane. Erratum (DESIGN 4): the loop is capped; the plane at depth 1 is always at or
+            // below the surface, so it needs no fetch.
+            let n = p.samples;
+            let mut fetches = 0;
+            for i in 0..n {
+                let z = i as f32 / n as f32;
+                fetches += 1;
+                if surface.depth(at(z), p.lod) <= z {
+                    return Hit { uv: at(z), depth: z, fetches };
+                }
+            }
+            Hit { uv: at(1.0), depth: 1.0, fetches }
+        }
+        Technique::PomClassic => pom_classic(surface, uv0, dir, &p),
+        Technique::Pom => pom(surface, uv0, dir, s, &p),
+        Technique::Relief => relief(surface, uv0, s, &p),
+        Technique::Exact => exact_view(surface, uv0, s),
+    }
+}
+
+/// The hit for an offset along the ray direction: the point of the ray at that UV offset.
+/// For a ray straight down (no UV travel) the offset says nothing about depth; `head_on` is the
+/// depth the technique estimated, the limit of the projection as the ray tilts toward vertical.
+fn hit_on_ray(uv0: Vec2, s: Vec2, offset: Vec2, head_on: f32, fetches: u32) -> Hit {
+    let len2 = s.length_squared();
+    let z = if len2 > 1e-20 { offset.dot(s) / len2 } else { head_on };
+    let z = if z.is_finite() { z.clamp(0.0, 1.0) } else { 0.0 };
+    Hit { uv: uv0 + s * z, depth: z, fetches }
+}
+
+/// Intersection of the ray `z = t` with the line through `(t0, d0)` and `(t1, d1)`, where the
+/// ray is above the surface at `t0` (`d0 > t0`) and at or below it at `t1` (`d1 <= t1`).
+fn line_intersection(t0: f32, d0: f32, t1: f32, d1: f32) -> f32 {
+    let a = d0 - t0;
+    let b = t1 - d1;
+    let denom = a + b;
+    if denom > 0.0 { t0 + (t1 - t0) * (a / denom) } else { t1 }
+}
+
+/// Brawley & Tatarchuk 2004: 8 samples along the biased parallax vector.
+fn pom_classic(surface: &Surface, uv0: Vec2, dir: Vec3, p: &TraceParams) -> Hit {
+    // Parallax length tan(theta) = sqrt(1 - z^2) / z of the unit view vector; the bias
+    // pb + (1 - pb)(2 cos(theta) - 1) shortens it toward grazing angles for pb < 1 (Brawley's
+    // vertex shader). Clamped at 0 so the vector never points back toward the viewer.
+    let cos = -dir.z;
+    let bias = (p.perspective_bias + (1.0 - p.perspective_bias) * (2.0 * cos - 1.0)).max(0.0);
+    let s = uv_per_depth(dir, p.depth_scale) * bias;
+    let n = 8;
+    // Brawley samples at 1/8 .. 8/8 of the vector; the entry (t = 0) is not fetched, and the
+    // first segment reuses the first sample's depth for its start, as the article's shader does.
+    let mut prev = (0.0f32, f32::NAN);
+    for i in 1..=n {
+        let t = i as f32 / n as f32;
+        let d = surface.depth(uv0 + s * t, p.lod);
+        if prev.1.is_nan() {
+            prev.1 = d;
+        }
+        if d <= t {
+            let z = line_intersection(prev.0, prev.1.max(prev.0), t, d);
+            return Hit { uv: uv0 + s * z, depth: z, fetches: i };
+        }
+        prev = (t, d);
+    }
+    Hit { uv: uv0 + s, depth: 1.0, fetches: n }
+}
+
+/// The adaptive sample count of Tatarchuk 2006 eq. (1), with the erratum of DESIGN section 4
+/// fixed: `n_max` at grazing angles (N.V = 0), `n_min` head-on (N.V = 1).
+#[must_use]
+pub fn adaptive_samples(cos_view: f32, min_samples: u32, max_samples: u32) -> u32 {
+    let c = if cos_view.is_finite() { cos_view.clamp(0.0, 1.0) } else { 0.0 };
+    let n = max_samples as f32 + (min_samples as f32 - max_samples as f32) * c;
+    (n.round() as u32).clamp(min_samples.min(max_samples).max(1), max_samples.max(1))
+}
+
+/// Zink / Tatarchuk 2006 POM with optional secant refinement.
+fn pom(surface: &Surface, uv0: Vec2, dir: Vec3, s: Vec2, p: &TraceParams) -> Hit {
+    let n = adaptive_samples(-dir.z, p.min_samples, p.max_samples);
+    let step = 1.0 / n as f32;
+    // The entry sample: a real fetch, so the first segment's line is the surface's.
+    let mut fetches = 1;
+    let mut prev = (0.0f32, surface.depth(uv0, p.lod));
+    if prev.1 <= 0.0 {
+        return Hit { uv: uv0, depth: 0.0, fetches };
+    }
+    let mut bracket = None;
+    for i in 1..=n {
+        let t = if i == n { 1.0 } else { i as f32 * step };
+        let d = surface.depth(uv0 + s * t, p.lod);
+        fetches += 1;
+        // Early exit: the first sample at or above the ray ends the search.
+        if d <= t {
+            bracket = Some((prev, (t, d)));
+            break;
+        }
+        prev = (t, d);
+    }
+    let Some((mut a, mut b)) = bracket else {
+        // Unreachable for depths in [0, 1] (the last sample, at t = 1, is never below the ray);
+        // kept so that a surprise cannot produce a hit outside the segment.
+        return Hit { uv: uv0 + s, depth: 1.0, fetches };
+    };
+    let mut z = line_intersection(a.0, a.1, b.0, b.1);
+    // Secant refinement (as Unity HDRP): sample at the intersection and keep the half of the
+    // bracket that still straddles the surface.
+    for _ in 0..p.refine {
+        let d = surface.depth(uv0 + s * z, p.lod);
+        fetches += 1;
+        if d > z {
+            a = (z, d);
+        } else {
+            b = (z, d);
+        }
+        z = line_intersection(a.0, a.1, b.0, b.1);
+    }
+    Hit { uv: uv0 + s * z, depth: z, fetches }
+}
+
+/// Relief mapping: linear search over `samples` planes, then binary refinement.
+fn relief(surface: &Surface, uv0: Vec2, s: Vec2, p: &TraceParams) -> Hit {
+    let n = p.samples;
+    let mut fetches = 0;
+    let (mut lo, mut hi) = (0.0f32, 1.0f32);
+    for i in 1..n {
+        let t = i as f32 / n as f32;
+        fetches += 1;
+        if surface.depth(uv0 + s * t, p.lod) <= t {
+            hi = t;
+            break;
+        }
+        lo = t;
+    }
+    // Binary search between the last plane above the surface and the first below it; the
+    // plane at depth 1 needs no fetch (it is never above the surface).
+    for _ in 0..p.binary_steps {
+        let mid = 0.5 * (lo + hi);
+        fetches += 1;
+        if surface.depth(uv0 + s * mid, p.lod) <= mid {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    let z = if p.binary_steps > 0 { 0.5 * (lo + hi) } else { hi };
+    Hit { uv: uv0 + s * z, depth: z, fetches }
+}
+
+/// The exact view trace: first intersection from depth 0 down to depth 1.
+fn exact_view(surface: &Surface, uv0: Vec2, s: Vec2) -> Hit {
+    let f = surface.field();
+    let size = DVec2::new(f64::from(f.width()), f64::from(f.height()));
+    // Work in unbounded texel coordinates and depth: P(t) = o + t * d with t = depth.
+    let o = DVec3::new(f64::from(uv0.x) * size.x, f64::from(uv0.y) * size.y, 0.0);
+    let d = DVec3::new(f64::from(s.x) * size.x, f64::from(s.y) * size.y, 1.0);
+    let r = exact_first_hit(surface, o, d, 0.0, 1.0);
+    let t = r.t.unwrap_or(1.0).clamp(0.0, 1.0);
+    let p = o + d * t;
+    Hit { uv: Vec2::new((p.x / size.x) as f32, (p.y / size.y) as f32), depth: t as f32, fetches: r.fetches }
+}
+
+/// Result of a pyramid traversal.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ExactResult {
+    /// Ray parameter of the first point at or below the surface, if any in the segment.
+    pub t: Option<f64>,
+    /// Fetches made.
+    pub fetches: u32,
+}
+
+/// The first `t` in `[t0, t1]` where the ray `o + t d` (unbounded texel coordinates x, y and
+/// depth z) is at or below the bilinear surface of the mip-0 texels, by maximum-height pyramid
+/// traversal (after Tevs, Ihrke & Seidel 2008, "Maximum Mipmaps for Fast, Accurate, and
+/// Scalable Dynamic Height Field Rendering").
+///
+/// A cell whose minimum depth the ray never reaches inside it is skipped whole; otherwise the
+/// walk descends, and in a level-0 cell the ray is solved against the (up to three) bilinear
+/// patches it crosses there. Works for rays going down (`d.z > 0`) and up (`d.z < 0`, shadow
+/// rays) and for wrapped and clamped edges.
+pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1: f64) -> ExactResult {
+    let pyr = surface.pyramid();
+    let f = surface.field();
+    let (w, h) = (i64::from(f.width()), i64::from(f.height()));
+    let edges = surface.edges();
+    let top = pyr.len() - 1;
+    let cap = surface.exact_fetch_cap();
+    let mut fetches = 0u32;
+    let mut t = t0;
+    // Start at the finest level: most rays meet the surface within a few texels of where they
+    // enter it, and each skipped cell climbs a level, so long empty stretches still cost only
+    // O(log size) steps.
+    let mut level = 0;
+    // A tiny step in t that moves the probe point well under a texel, used to pick the cell the
+    // ray is entering when it sits exactly on a wall.
+    let speed = d.x.abs().max(d.y.abs()).max(1.0);
+    let nudge = 1e-9 / speed;
+    while t <= t1 && fetches < cap {
+        let probe = o + d * (t + nudge).min(t1);
+        let cell = cell_at(pyr, level, probe.x, probe.y, w, h, edges);
+        let t_exit = exit_time(&cell, o, d, t, t1);
+        fetches += 1;
+        let bound = f64::from(pyr.min_depth(level, cell.ix, cell.iy));
+        // The deepest point of the ray inside the cell is at its exit (going down) or entry
+        // (going up).
+        let deepest = if d.z >= 0.0 { o.z + d.z * t_exit } else { o.z + d.z * t };
+        if deepest < bound {
+            // The ray stays above everything in this cell: skip it and climb a level.
+            if t_exit >= t1 {
+                break;
+            }
+            // Climb only when the ray also leaves the parent cell: inside the same parent the
+            // parent's bound is already known to be reached, and climbing would only descend
+            // again.
+            if level < top {
+                let parent = cell_at(pyr, level + 1, probe.x, probe.y, w, h, edges);
+                if exit_time(&parent, o, d, t, t1) <= t_exit {
+                    level += 1;
+                }
+            }
+            t = t_exit;
+            continue;
+        }
+        if level > 0 {
+            // Going down, nothing is hit before the ray reaches the bound: jump there.
+            if d.z > 0.0 {
+                t = t.max((bound - o.z) / d.z);
+            }
+            level -= 1;
+            continue;
+        }
+        // Level 0: solve against the bilinear patches inside this texel footprint.
+        let (hit, gathers) = leaf_hit(f, edges, o, d, t, t_exit, &cell);
+        fetches += gathers;
+        if let Some(th) = hit {
+            return ExactResult { t: Some(th), fetches };
+        }
+        if t_exit >= t1 {
+            break;
+        }
+        // Stay at level 0: the ray is close to the surface here, and the next texel is the
+        // likeliest place for the hit; a skip there climbs again.
+        t = t_exit;
+    }
+    ExactResult { t: None, fetches }
+}
+
+/// Where the ray `o + t d` leaves `cell`, at or after `t` and no later than `t1`.
+fn exit_time(cell: &Cell, o: DVec3, d: DVec3, t: f64, t1: f64) -> f64 {
+    let mut t_exit = t1;
+    if d.x > 0.0 {
+        t_exit = t_exit.min((cell.x1 - o.x) / d.x);
+    } else if d.x < 0.0 {
+        t_exit = t_exit.min((cell.x0 - o.x) / d.x);
+    }
+    if d.y > 0.0 {
+        t_exit = t_exit.min((cell.y1 - o.y) / d.y);
+    } else if d.y < 0.0 {
+        t_exit = t_exit.min((cell.y0 - o.y) / d.y);
+    }
+    t_exit.max(t)
+}
+
+/// A pyramid cell in unbounded texel coordinates, with its indices in the level.
+struct Cell {
+    ix: u32,
+    iy: u32,
+    x0: f64,
+    x1: f64,
+    y0: f64,
+    y1: f64,
+}
+
+/// The cell of `level` containing texel-space point `(x, y)`.
+///
+/// With wrapping edges the plane tiles: the cell is found in the tile containing the point and
+/// its walls are returned in unbounded coordinates. With clamped edges the border cells extend
+/// to infinity outward (the clamped surface continues the border texels unchanged).
+fn cell_at(pyr: &MaxHeightPyramid, level: usize, x: f64, y: f64, w: i64, h: i64, edges: EdgeMode) -> Cell {
+    let (nw, nh) = pyr.level_size(level);
+    let size = 1i64 << level;
+    let axis = |p: f64, n: i64, cells: u32| -> (u32, f64, f64) {
+        let fp = p.floor();
+        match edges {
+            EdgeMode::Wrap => {
+                let tile = (fp / n as f64).floor();
+                let local = (fp as i64).rem_euclid(n);
+                let c = (local / size).min(i64::from(cells) - 1);
+                let base = tile * n as f64;
+                let lo = base + (c * size) as f64;
+                let hi = base + ((c + 1) * size).min(n) as f64;
+                (c as u32, lo, hi)
+            }
+            EdgeMode::Clamp => {
+                let local = (fp as i64).clamp(0, n - 1);
+                let c = (local / size).min(i64::from(cells) - 1);
+                let lo = if c == 0 { f64::NEG_INFINITY } else { (c * size) as f64 };
+                let hi = if c == i64::from(cells) - 1 { f64::INFINITY } else { ((c + 1) * size).min(n) as f64 };
+                (c as u32, lo, hi)
+            }
+        }
+    };
+    let (ix, x0, x1) = axis(x, w, nw);
+    let (iy, y0, y1) = axis(y, h, nh);
+    Cell { ix, iy, x0, x1, y0, y1 }
+}
+
+/// Solves the ray against the bilinear patches it crosses between `ta` and `tb` inside a
+/// level-0 cell. Returns the first hit and the number of gathers (one per patch).
+///
+/// A texel footprint holds one line through texel centres per axis (`x0 + 0.5`): the ray is
+/// split there into at most three segments, each inside one bilinear patch. A clamped border
+/// cell reaches to infinity outward, but beyond the border texel's centre the clamped surface
+/// is constant along that axis, so the same single split is exact there too.
+fn leaf_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: f64, cell: &Cell) -> (Option<f64>, u32) {
+    let centre = |lo: f64, index: u32| match edges {
+        EdgeMode::Wrap => lo + 0.5,
+        EdgeMode::Clamp => f64::from(index) + 0.5,
+    };
+    let mut cuts = [tb, tb];
+    for (k, (p0, dp, c)) in
+        [(o.x, d.x, centre(cell.x0, cell.ix)), (o.y, d.y, centre(cell.y0, cell.iy))].into_iter().enumerate()
+    {
+        if dp != 0.0 {
+            let tc = (c - p0) / dp;
+            if tc > ta && tc < tb {
+                cuts[k] = tc;
+            }
+        }
+    }
+    if cuts[1] < cuts[0] {
+        cuts.swap(0, 1);
+    }
+    let mut gathers = 0;
+    let mut start = ta;
+    for end in [cuts[0], cuts[1], tb] {
+        if end <= start && !(end == tb && start == ta) {
+            continue;
+        }
+        gathers += 1;
+        if let Some(th) = patch_hit(f, edges, o, d, start, end) {
+            return (Some(th), gathers);
+        }
+        start = end;
+    }
+    (None, gathers)
+}
+
+/// First `t` in `[ta, tb]` where the ray is at or below the one bilinear patch containing the
+/// segment's midpoint.
+fn patch_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: f64) -> Option<f64> {
+    let mid = o + d * (0.5 * (ta + tb));
+    // Patch between texel centres (i, j) and (i + 1, j + 1), centres at k + 0.5.
+    let i = (mid.x - 0.5).floor();
+    let j = (mid.y - 0.5).floor();
+    let (ii, jj) = (i as i64, j as i64);
+    let s00 = f64::from(f.depth_at(ii, jj, edges));
+    let s10 = f64::from(f.depth_at(ii + 1, jj, edges));
+    let s01 = f64::from(f.depth_at(ii, jj + 1, edges));
+    let s11 = f64::from(f.depth_at(ii + 1, jj + 1, edges));
+    // S(fx, fy) = a + b fx + c fy + e fx fy with fx = x - (i + 0.5), fy = y - (j + 0.5).
+    let (a, b, c, e) = (s00, s10 - s00, s01 - s00, s00 - s10 - s01 + s11);
+    let (fx0, fy0) = (o.x - (i + 0.5), o.y - (j + 0.5));
+    // g(t) = z(t) - S(x(t), y(t)) = A t^2 + B t + C; the ray is at or below where g >= 0.
+    let qa = -e * d.x * d.y;
+    let qb = d.z - b * d.x - c * d.y - e * (fx0 * d.y + fy0 * d.x);
+    let qc = o.z - (a + b * fx0 + c * fy0 + e * fx0 * fy0);
+    let g = |t: f64| (qa * t + qb) * t + qc;
+    if g(ta) >= 0.0 {
+        return Some(ta);
+    }
+    // Roots of g in (ta, tb], smallest first.
+    let mut best: Option<f64> = None;
+    let mut consider = |r: f64| {
+        if r.is_finite() && r > ta && r <= tb && best.is_none_or(|b| r < b) {
+            best = Some(r);
+        }
+    };
+    let scale = qb.abs().max(qc.abs()).max(1e-300);
+    if qa.abs() <= 1e-12 * scale {
+        if qb != 0.0 {
+            consider(-qc / qb);
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let sq = disc.sqrt();
+            // Numerically stable pair of roots.
+            let q = -0.5 * (qb + qb.signum() * sq);
+            if q != 0.0 {
+                consider(q / qa);
+                consider(qc / q);
+            } else {
+                consider(-qb / (2.0 * qa));
+            }
+        }
+    }
+    if let Some(r) = best {
+        return Some(r);
+    }
+    // No sign change found by the roots (a tangent touch lost to rounding): accept the end if
+    // it is at or below the surface.
+    if g(tb) >= 0.0 { Some(tb) } else { None }
+}

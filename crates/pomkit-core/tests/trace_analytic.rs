@@ -1,0 +1,429 @@
+//! Every technique against analytic height fields with known answers, the exact tracer against
+//! an independent brute-force search, property tests over random rays, shadows and the LOD fade.
+
+use pomkit_core::glam::{Vec2, Vec3};
+use pomkit_core::procedural::{Pattern, generate};
+use pomkit_core::shadow::{ShadowMode, ShadowParams, lod_weight, shadow};
+use pomkit_core::trace::{Hit, Ray, Surface, Technique, TraceParams, adaptive_samples, trace};
+use pomkit_core::{EdgeMode, HeightField};
+use proptest::prelude::*;
+
+const N: u32 = 64;
+
+fn surface(f: HeightField, edges: EdgeMode) -> Surface {
+    Surface::new(f, edges, 0.1)
+}
+
+fn params(edges: EdgeMode) -> TraceParams {
+    TraceParams { edges, ..Default::default() }
+}
+
+/// Texel distance between two UVs on an N x N field.
+fn texels(a: Vec2, b: Vec2) -> f32 {
+    ((a - b) * N as f32).length()
+}
+
+/// Independent truth: march the ray in steps far below a texel, sampling the bilinear surface
+/// in f64, then bisect the first bracket. Returns the hit depth.
+fn brute_force(f: &HeightField, edges: EdgeMode, ray: &Ray, depth_scale: f64) -> f64 {
+    let dir = ray.dir.as_dvec3().normalize();
+    let (w, h) = (f64::from(f.width()), f64::from(f.height()));
+    let s = (dir.x * depth_scale / -dir.z * w, dir.y * depth_scale / -dir.z * h);
+    let o = (f64::from(ray.uv.x) * w, f64::from(ray.uv.y) * h);
+    let surf = |x: f64, y: f64| {
+        let (x, y) = (x - 0.5, y - 0.5);
+        let (i, j) = (x.floor(), y.floor());
+        let (fx, fy) = (x - i, y - j);
+        let d = |a: f64, b: f64| f64::from(f.depth_at(a as i64, b as i64, edges));
+        let top = d(i, j) * (1.0 - fx) + d(i + 1.0, j) * fx;
+        let bot = d(i, j + 1.0) * (1.0 - fx) + d(i + 1.0, j + 1.0) * fx;
+        top * (1.0 - fy) + bot * fy
+    };
+    let below = |t: f64| t >= surf(o.0 + s.0 * t, o.1 + s.1 * t);
+    let travel = (s.0 * s.0 + s.1 * s.1).sqrt();
+    let steps = ((travel / 0.01).ceil() as usize).max(20_000);
+    let mut prev = 0.0;
+    if below(0.0) {
+        return 0.0;
+    }
+    for k in 1..=steps {
+        let t = k as f64 / steps as f64;
+        if below(t) {
+            let (mut lo, mut hi) = (prev, t);
+            for _ in 0..80 {
+                let mid = 0.5 * (lo + hi);
+                if below(mid) { hi = mid } else { lo = mid }
+            }
+            return hi;
+        }
+        prev = t;
+    }
+    1.0
+}
+
+/// The point of the ray at depth z.
+fn on_ray(ray: &Ray, z: f64, depth_scale: f32) -> Vec2 {
+    let d = ray.dir.normalize();
+    ray.uv + Vec2::new(d.x, d.y) * (depth_scale / -d.z) * z as f32
+}
+
+fn rays_over(count: usize, angle_deg: f32, seed: u32) -> Vec<Ray> {
+    (0..count)
+        .map(|k| {
+            let h = (k as u32).wrapping_mul(2_654_435_761) ^ seed.wrapping_mul(40_503);
+            let u = (h % 1000) as f32 / 1000.0;
+            let v = ((h / 1000) % 1000) as f32 / 1000.0;
+            let az = (h % 6283) as f32 / 1000.0;
+            Ray::at_angle(Vec2::new(u, v), angle_deg.to_radians(), az)
+        })
+        .collect()
+}
+
+/// Analytic fields with their names; values are heights (white = high).
+fn analytic_fields() -> Vec<(&'static str, HeightField)> {
+    let c = N as f32 / 2.0;
+    vec![
+        ("flat", HeightField::constant(N, N, 0.6)),
+        ("tilted plane", HeightField::from_height_fn(N, N, |x, _| 0.1 + 0.8 * x as f32 / (N - 1) as f32)),
+        ("step", HeightField::from_height_fn(N, N, |x, _| if x < N / 2 { 0.8 } else { 0.2 })),
+        (
+            "pyramid",
+            HeightField::from_height_fn(N, N, |x, y| {
+                let r = ((x as f32 + 0.5 - c).abs()).max((y as f32 + 0.5 - c).abs());
+                (1.0 - r / c).max(0.0)
+            }),
+        ),
+        (
+            "sphere cap",
+            HeightField::from_height_fn(N, N, |x, y| {
+                let r2 = ((x as f32 + 0.5 - c).powi(2) + (y as f32 + 0.5 - c).powi(2)) / (c * 0.8).powi(2);
+                (1.0 - r2).max(0.0).sqrt()
+            }),
+        ),
+        ("spike", generate(Pattern::Spike, N, N)),
+    ]
+}
+
+#[test]
+fn exact_matches_brute_force_on_analytic_fields_at_every_angle() {
+    for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
+        for (name, f) in analytic_fields() {
+            let s = surface(f.clone(), edges);
+            for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0] {
+                for ray in rays_over(24, angle, 7) {
+                    let hit = trace(&s, &ray, Technique::Exact, &params(edges));
+                    let truth = brute_force(&f, edges, &ray, 0.1);
+                    let err = texels(hit.uv, on_ray(&ray, truth, 0.1));
+                    assert!(
+                        err < 1e-3,
+                        "{name} {edges:?} {angle}deg {ray:?}: exact depth {} vs brute {truth}: {err} texels",
+                        hit.depth
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn flat_field_gives_each_technique_its_stated_error() {
+    let c = 0.4f32; // depth
+    let s = surface(HeightField::constant(N, N, c), EdgeMode::Wrap);
+    for angle in [0.0f32, 30.0, 60.0, 75.0] {
+        for ray in rays_over(8, angle, 3) {
+            let truth = on_ray(&ray, f64::from(c), 0.1);
+            let p = params(EdgeMode::Wrap);
+            let len = (on_ray(&ray, 1.0, 0.1) - ray.uv).length() * N as f32; // texels per unit depth
+            let err = |t| texels(trace(&s, &ray, t, &p).uv, truth);
+            // Linear profiles are found exactly by the piecewise-linear intersection.
+            assert!(err(Technique::Exact) < 1e-3);
+            assert!(err(Technique::Pom) < 1e-3, "pom {angle}");
+            assert!(err(Technique::PomClassic) < 1e-3, "pom-classic {angle}");
+            // Plane marching: within one plane spacing; relief within the binary step.
+            assert!(err(Technique::Steep) <= len / p.samples as f32 + 1e-3, "steep {angle}");
+            assert!(err(Technique::Relief) <= len / (p.samples as f32 * 64.0) + 1e-3, "relief {angle}");
+            // Offset limiting shortens the shift by cos(theta): error c * len * (1 - cos).
+            let limited = c * len * (1.0 - angle.to_radians().cos());
+            assert!((err(Technique::Parallax) - limited).abs() < 1e-2, "parallax {angle}");
+            assert!((err(Technique::Iterative) - limited).abs() < 1e-2, "iterative {angle}");
+            // No offset at all: the whole shift c * len.
+            assert!((err(Technique::Normal) - c * len).abs() < 1e-2);
+            assert_eq!(trace(&s, &ray, Technique::Flat, &p).fetches, 0);
+        }
+    }
+}
+
+#[test]
+fn tilted_plane_is_found_exactly_by_linear_intersections() {
+    // A plane in u: the bilinear surface equals it away from the wrap seam; use clamp.
+    let f = HeightField::from_height_fn(N, N, |x, _| 0.1 + 0.8 * x as f32 / (N - 1) as f32);
+    let s = surface(f.clone(), EdgeMode::Clamp);
+    let p = params(EdgeMode::Clamp);
+    for angle in [0.0f32, 30.0, 60.0] {
+        for ray in rays_over(16, angle, 11) {
+            let ray = Ray { uv: ray.uv * 0.6 + 0.2, ..ray };
+            let truth = on_ray(&ray, brute_force(&f, EdgeMode::Clamp, &ray, 0.1), 0.1);
+            let exact = trace(&s, &ray, Technique::Exact, &p);
+            assert!(texels(exact.uv, truth) < 1e-3);
+            // Inside the texel-centre range the profile is linear: pom is exact there.
+            let pom = trace(&s, &ray, Technique::Pom, &p);
+            let inside = |uv: Vec2| uv.x > 0.5 / N as f32 && uv.x < 1.0 - 0.5 / N as f32;
+            if inside(truth) && inside(ray.uv) {
+                assert!(texels(pom.uv, truth) < 1e-2, "pom {angle} {ray:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn sampling_techniques_stay_within_a_step_on_smooth_fields() {
+    // On the sphere cap and the pyramid, steep and pom err by at most about one sample spacing;
+    // check the mean, which also shows the ordering steep > pom > exact.
+    for (name, f) in analytic_fields().into_iter().filter(|(n, _)| *n == "sphere cap" || *n == "pyramid") {
+        let s = surface(f.clone(), EdgeMode::Wrap);
+        let p = params(EdgeMode::Wrap);
+        let rays = rays_over(64, 60.0, 5);
+        let mean = |t: Technique| {
+            rays.iter().map(|r| texels(trace(&s, r, t, &p).uv, trace(&s, r, Technique::Exact, &p).uv)).sum::<f32>()
+                / rays.len() as f32
+        };
+        let spacing = 0.1 * 60f32.to_radians().tan() * N as f32 / p.samples as f32;
+        let (steep, pom) = (mean(Technique::Steep), mean(Technique::Pom));
+        assert!(steep <= spacing, "{name}: steep {steep} vs spacing {spacing}");
+        assert!(pom < steep, "{name}: pom {pom} should beat steep {steep}");
+        assert!(mean(Technique::Relief) < steep, "{name}: relief should beat steep");
+    }
+}
+
+#[test]
+fn exact_finds_the_one_texel_spike_at_85_degrees_where_pom_misses() {
+    let f = generate(Pattern::Spike, N, N);
+    let s = surface(f.clone(), EdgeMode::Wrap);
+    let p = TraceParams { min_samples: 32, max_samples: 32, ..params(EdgeMode::Wrap) };
+    // The spike's centre is texel (32, 32): aim rays along +u to pass over it at depths around
+    // a half, and count how many each technique sees.
+    let centre = Vec2::splat((N / 2) as f32 + 0.5) / N as f32;
+    let dir = Ray::at_angle(Vec2::ZERO, 85f32.to_radians(), 0.0).dir;
+    let per_depth = on_ray(&Ray::new(Vec2::ZERO, dir), 1.0, 0.1);
+    let (mut exact_hits, mut pom_hits) = (0, 0);
+    for k in 0..20 {
+        let z = 0.3 + 0.02 * k as f32;
+        let ray = Ray::new(centre - per_depth * z, dir);
+        let truth = brute_force(&f, EdgeMode::Wrap, &ray, 0.1);
+        assert!(truth < 0.9, "the spike is in this ray's path (depth {truth})");
+        let exact = trace(&s, &ray, Technique::Exact, &p);
+        assert!(texels(exact.uv, on_ray(&ray, truth, 0.1)) < 1e-3);
+        exact_hits += usize::from(exact.depth < 0.9);
+        pom_hits += usize::from(trace(&s, &ray, Technique::Pom, &p).depth < 0.9);
+    }
+    assert_eq!(exact_hits, 20);
+    assert!(pom_hits <= 10, "pom with 32 samples should miss the spike on most of these rays ({pom_hits}/20 seen)");
+}
+
+#[test]
+fn adaptive_sample_count_grows_toward_grazing() {
+    assert_eq!(adaptive_samples(1.0, 8, 32), 8);
+    assert_eq!(adaptive_samples(0.0, 8, 32), 32);
+    assert_eq!(adaptive_samples(0.5, 8, 32), 20);
+    assert!(adaptive_samples(0.2, 8, 50) > adaptive_samples(0.8, 8, 50));
+    assert_eq!(adaptive_samples(f32::NAN, 8, 32), 32);
+}
+
+#[test]
+fn refinement_reduces_pom_error() {
+    let f = generate(Pattern::Cobblestones, N, N);
+    let s = surface(f, EdgeMode::Wrap);
+    let rays = rays_over(200, 75.0, 9);
+    let mean = |refine: u32| {
+        let p = TraceParams { refine, ..params(EdgeMode::Wrap) };
+        rays.iter()
+            .map(|r| texels(trace(&s, r, Technique::Pom, &p).uv, trace(&s, r, Technique::Exact, &p).uv))
+            .sum::<f32>()
+    };
+    assert!(mean(2) < mean(0), "secant steps should help on average");
+}
+
+#[test]
+fn back_facing_and_degenerate_rays_return_the_entry_point() {
+    let s = surface(generate(Pattern::Bricks, N, N), EdgeMode::Wrap);
+    let p = params(EdgeMode::Wrap);
+    for dir in
+        [Vec3::new(0.3, 0.0, 0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::ZERO, Vec3::NAN, Vec3::new(0.0, 0.0, f32::INFINITY)]
+    {
+        for t in Technique::ALL {
+            let hit = trace(&s, &Ray::new(Vec2::new(0.3, 0.4), dir), t, &p);
+            assert_eq!(hit, Hit { uv: Vec2::new(0.3, 0.4), depth: 0.0, fetches: 0 }, "{t} {dir}");
+        }
+    }
+}
+
+#[test]
+fn parameters_are_validated_and_sanitized() {
+    let bad = [
+        TraceParams { depth_scale: 0.0, ..Default::default() },
+        TraceParams { depth_scale: -1.0, ..Default::default() },
+        TraceParams { depth_scale: f32::NAN, ..Default::default() },
+        TraceParams { perspective_bias: f32::INFINITY, ..Default::default() },
+        TraceParams { min_samples: 40, max_samples: 8, ..Default::default() },
+    ];
+    for p in bad {
+        assert!(p.validate().is_err(), "{p:?}");
+    }
+    // Huge and zero counts are clamped, never hang.
+    let s = surface(generate(Pattern::Waves, 16, 16), EdgeMode::Wrap);
+    let p =
+        TraceParams { samples: u32::MAX, max_samples: u32::MAX, min_samples: 0, iterations: 0, ..Default::default() };
+    let ray = Ray::at_angle(Vec2::splat(0.5), 1.0, 0.3);
+    for t in Technique::ALL {
+        let hit = trace(&s, &ray, t, &p);
+        assert!(hit.fetches <= t.fetch_bound(&p, &s), "{t}");
+    }
+    assert!("pom-classic".parse::<Technique>().is_ok());
+    assert!("POM".parse::<Technique>().is_ok());
+    assert!("cone".parse::<Technique>().unwrap_err().to_string().contains("pom-classic"));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+    #[test]
+    fn random_rays_give_finite_hits_on_the_segment(
+        u in -2.0f32..3.0, v in -2.0f32..3.0,
+        dx in -1.0f32..1.0, dy in -1.0f32..1.0, dz in prop_oneof![Just(0.0f32), Just(-1e-7f32), Just(-1.0f32), -1.0f32..0.2],
+        seed in 0u32..4, wrap in any::<bool>(), scale in 0.01f32..0.5,
+    ) {
+        let pattern = [Pattern::Cobblestones, Pattern::Spike, Pattern::Text, Pattern::Bricks][seed as usize];
+        let edges = if wrap { EdgeMode::Wrap } else { EdgeMode::Clamp };
+        let s = Surface::new(generate(pattern, 24, 17), edges, scale);
+        let p = TraceParams { depth_scale: scale, edges, ..Default::default() };
+        let ray = Ray::new(Vec2::new(u, v), Vec3::new(dx, dy, dz));
+        for t in Technique::ALL {
+            let hit = trace(&s, &ray, t, &p);
+            prop_assert!(hit.uv.is_finite() && hit.depth.is_finite(), "{t}: {hit:?}");
+            prop_assert!((0.0..=1.0).contains(&hit.depth), "{t}: depth {}", hit.depth);
+            prop_assert!(hit.fetches <= t.fetch_bound(&p, &s), "{t}: {} fetches", hit.fetches);
+            // The hit lies on the traced segment (pom-classic's may be shortened by its bias,
+            // which is 1 here, so it too lies on the ray).
+            if dz < 0.0 && (dx != 0.0 || dy != 0.0 || dz != 0.0) {
+                let d = ray.dir.normalize();
+                if -d.z >= pomkit_core::trace::MIN_COS {
+                    let expect = ray.uv + Vec2::new(d.x, d.y) * (scale / -d.z) * hit.depth;
+                    let tol = 1e-4 * (1.0 + (expect - ray.uv).length());
+                    prop_assert!((hit.uv - expect).length() <= tol, "{t}: {:?} vs {expect:?}", hit.uv);
+                }
+            }
+        }
+    }
+}
+
+// ---- shadows ----
+
+/// Depth 1 everywhere except a wall of columns 30..34 at depth 0 (height 1).
+fn wall() -> HeightField {
+    HeightField::from_height_fn(N, N, |x, _| if (30..34).contains(&x) { 1.0 } else { 0.0 })
+}
+
+#[test]
+fn a_point_behind_a_wall_is_shadowed_and_one_in_front_is_lit() {
+    let s = surface(wall(), EdgeMode::Clamp);
+    let p = params(EdgeMode::Clamp);
+    // Receiver at depth 1, 6 texels left of the wall; light low from +u (behind the wall) or
+    // from -u (in front).
+    let uv = Vec2::new(24.5 / N as f32, 0.5);
+    let from_behind = Vec3::new(0.8, 0.0, 0.3);
+    let from_front = Vec3::new(-0.8, 0.0, 0.3);
+    for mode in [ShadowMode::Hard, ShadowMode::Soft, ShadowMode::Exact] {
+        let sp = ShadowParams { mode, softness: 0.05 };
+        let behind = shadow(&s, uv, 1.0, from_behind, &sp, &p);
+        let front = shadow(&s, uv, 1.0, from_front, &sp, &p);
+        assert!(behind.visibility < 0.05, "{mode:?}: {behind:?}");
+        assert!(front.visibility > 0.95, "{mode:?}: {front:?}");
+        assert!(behind.fetches > 0);
+        // Facing away from the light: no trace, no light.
+        assert_eq!(shadow(&s, uv, 1.0, Vec3::new(0.0, 0.0, -1.0), &sp, &p).fetches, 0);
+        assert_eq!(shadow(&s, uv, 1.0, Vec3::new(0.0, 0.0, -1.0), &sp, &p).visibility, 0.0);
+        // On top of the wall (depth 0) nothing can shadow.
+        assert_eq!(shadow(&s, Vec2::new(31.5 / N as f32, 0.5), 0.0, from_behind, &sp, &p).visibility, 1.0);
+    }
+}
+
+#[test]
+fn soft_shadow_lies_in_unit_range_and_lightens_with_blocker_distance() {
+    let s = surface(wall(), EdgeMode::Clamp);
+    let p = TraceParams { min_samples: 64, max_samples: 64, ..params(EdgeMode::Clamp) };
+    let sp = ShadowParams { mode: ShadowMode::Soft, softness: 0.3 };
+    // Light from +u at 45 degrees; receivers at depth 1 farther and farther left of the wall.
+    let light = Vec3::new(1.0, 0.0, 1.0);
+    let mut last = -1.0f32;
+    let mut values = vec![];
+    for dist in [1.0f32, 2.0, 4.0, 6.0, 8.0, 10.0, 14.0] {
+        let uv = Vec2::new((30.0 - dist) / N as f32, 0.5);
+        let v = shadow(&s, uv, 1.0, light, &sp, &p).visibility;
+        assert!((0.0..=1.0).contains(&v));
+        assert!(v >= last - 1e-6, "visibility should not drop as the blocker recedes: {values:?} then {v}");
+        last = v;
+        values.push(v);
+    }
+    assert!(values[0] < 0.1 && *values.last().unwrap() > 0.9, "{values:?}");
+    assert!(values.iter().any(|&v| v > 0.1 && v < 0.9), "a penumbra between: {values:?}");
+}
+
+#[test]
+fn exact_shadow_agrees_with_brute_force_over_random_points() {
+    let f = generate(Pattern::Cobblestones, N, N);
+    let s = surface(f.clone(), EdgeMode::Wrap);
+    let p = params(EdgeMode::Wrap);
+    let sp = ShadowParams { mode: ShadowMode::Exact, ..Default::default() };
+    let light = Vec3::new(0.7, -0.3, 0.5);
+    let mut disagreements = 0;
+    for ray in rays_over(150, 40.0, 21) {
+        let hit = trace(&s, &ray, Technique::Exact, &p);
+        let vis = shadow(&s, hit.uv, hit.depth, light, &sp, &p).visibility;
+        // Brute force: march toward the light in tiny steps; shadowed if clearly below.
+        let l = light.normalize();
+        let step = Vec2::new(l.x, l.y) * (0.1 / l.z);
+        let mut blocked = false;
+        for k in 1..4000 {
+            let t = hit.depth * k as f32 / 4000.0;
+            let z = hit.depth - t;
+            if s.field().sample_bilinear(hit.uv + step * t, EdgeMode::Wrap) < z - 1e-3 {
+                blocked = true;
+                break;
+            }
+        }
+        if blocked != (vis == 0.0) {
+            disagreements += 1;
+        }
+    }
+    // Grazing contacts within the 1e-3 tolerance may legitimately differ.
+    assert!(disagreements <= 2, "{disagreements} disagreements");
+}
+
+#[test]
+fn lod_weight_fades_continuously_over_the_last_level() {
+    let th = 4.0;
+    assert_eq!(lod_weight(0.0, th), 1.0);
+    assert_eq!(lod_weight(3.0, th), 1.0);
+    assert_eq!(lod_weight(3.25, th), 0.75);
+    assert_eq!(lod_weight(4.0, th), 0.0);
+    assert_eq!(lod_weight(9.0, th), 0.0);
+    let mut x = 0.0f32;
+    while x < 8.0 {
+        let d = 1e-3;
+        assert!((lod_weight(x + d, th) - lod_weight(x, th)).abs() <= d * 1.01 + 1e-6, "jump at {x}");
+        x += 0.01;
+    }
+    assert_eq!(lod_weight(f32::NAN, th), 1.0);
+}
+
+#[test]
+fn one_sample_techniques_are_continuous_at_normal_incidence() {
+    let s = surface(generate(Pattern::Pyramids, N, N), EdgeMode::Wrap);
+    let p = params(EdgeMode::Wrap);
+    let uv = Vec2::new(0.3, 0.3);
+    for t in [Technique::Parallax, Technique::Iterative, Technique::Exact, Technique::Pom] {
+        let straight = trace(&s, &Ray::new(uv, Vec3::new(0.0, 0.0, -1.0)), t, &p);
+        let tilted = trace(&s, &Ray::new(uv, Vec3::new(1e-3, 0.0, -1.0)), t, &p);
+        assert!((straight.depth - tilted.depth).abs() < 1e-3, "{t}: {} vs {}", straight.depth, tilted.depth);
+        assert!(straight.depth > 0.1, "{t}: the pyramids are not at the surface here");
+    }
+}
