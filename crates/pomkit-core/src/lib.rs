@@ -7,6 +7,29 @@
 //! Conventions are those of DESIGN section 2: tangent space x = T (along +u), y = B (up the
 //! image, along -v), z = N; depth `d` in `[0, 1]` with 0 at the polygon's surface; UV `(0, 0)` at
 //! the top-left corner of the image.
+//!
+//! ```
+//! use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals};
+//! use pomkit_core::glam::{Vec2, Vec3};
+//! use pomkit_core::procedural::{Pattern, generate};
+//! use pomkit_core::{EdgeMode, Ray, ShadowMode, ShadowParams, Surface, Technique, TraceParams, shadow, trace};
+//!
+//! let field = generate(Pattern::Bricks, 256, 256);
+//! let opts = NormalBakeOptions { scale: 8.0, filter: NormalFilter::Sobel, ..Default::default() };
+//! let normals = bake_normals(&field, &opts)?;
+//! assert_eq!(normals.len(), 256 * 256);
+//!
+//! // Trace a view ray with parallax occlusion mapping, then shadow the hit point softly.
+//! let params = TraceParams { depth_scale: 0.1, refine: 2, ..Default::default() };
+//! let surface = Surface::new(field, EdgeMode::Wrap, params.depth_scale);
+//! let ray = Ray::new(Vec2::new(0.3, 0.4), Vec3::new(0.6, 0.1, -0.8));
+//! let hit = trace(&surface, &ray, Technique::Pom, &params);
+//! let light = Vec3::new(-0.5, 0.2, 0.7); // toward the light, in the same (u, v, normal) frame
+//! let soft = ShadowParams { mode: ShadowMode::Soft, softness: 0.1 };
+//! let lit = shadow(&surface, hit.uv, hit.depth, light, &soft, &params);
+//! assert!((0.0..=1.0).contains(&lit.visibility) && (0.0..=1.0).contains(&hit.depth));
+//! # Ok::<(), pomkit_core::bake::BakeError>(())
+//! ```
 
 pub mod accuracy;
 pub mod bake;

@@ -86,7 +86,8 @@ pub enum Technique {
     /// At most `n` fetches. Stair-steps between planes.
     Steep,
     /// Brawley & Tatarchuk 2004: the parallax vector scaled by the perspective bias, 8 fixed
-    /// samples, line-line intersection. 8 fetches. Misses features thinner than 1/8 of the trace.
+    /// samples (all fetched: the article's shader has no early exit), line-line intersection.
+    /// 8 fetches. Misses features thinner than 1/8 of the trace.
     PomClassic,
     /// Zink / Tatarchuk 2006: between `n_min` and `n_max` samples (more at grazing angles),
     /// early exit, piecewise-linear intersection, optional secant refinement. At most
@@ -504,7 +505,9 @@ fn pom_classic(surface: &Surface, uv0: Vec2, dir: Vec3, p: &TraceParams) -> Hit 
         }
         if d <= t {
             let z = line_intersection(prev.0, prev.1.max(prev.0), t, d);
-            return Hit { uv: uv0 + s * z, depth: z, fetches: i };
+            // The article's ps_2_0 shader has no dynamic branching: it fetches all eight
+            // samples before choosing the segment, so the cost is always 8.
+            return Hit { uv: uv0 + s * z, depth: z, fetches: n };
         }
         prev = (t, d);
     }
