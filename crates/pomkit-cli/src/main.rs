@@ -5,6 +5,7 @@ mod bake;
 mod compare;
 mod output;
 mod progress;
+mod render;
 mod technique;
 mod trace;
 
@@ -27,6 +28,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Verb {
+    /// Render a scene (or, with none, the built-in demo scene) to a PNG.
+    Render(render::RenderArgs),
     /// Bake normal, parallax or packed maps from a height map.
     #[command(subcommand)]
     Bake(bake::BakeVerb),
@@ -181,6 +184,7 @@ fn generate(args: &GenerateArgs) -> Result<()> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.verb {
+        Verb::Render(args) => render::run(args),
         Verb::Bake(verb) => bake::run(verb),
         Verb::Generate(args) => generate(args),
         Verb::Trace(args) => trace::run(args),

@@ -33,9 +33,12 @@
 
 pub mod accuracy;
 pub mod bake;
+pub mod demo;
 pub mod heightfield;
+pub mod mesh;
 pub mod procedural;
 pub mod pyramid;
+pub mod scene;
 pub mod shadow;
 pub mod tangent;
 pub mod trace;

@@ -15,6 +15,12 @@ use std::str::FromStr;
 use image::{DynamicImage, ImageEncoder};
 use pomkit_core::{HeightField, HeightFieldError};
 
+pub mod mesh;
+pub mod scene;
+
+pub use mesh::{MeshLoadError, load_mesh};
+pub use scene::{SceneError, load_scene, parse_scene};
+
 /// Which channel of an image holds the height.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Channel {

@@ -1,0 +1,178 @@
+//! `pomkit render`: the main job. With no scene it renders the built-in demo scene.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use pomkit_core::scene::Scene;
+use pomkit_core::trace::Technique;
+use pomkit_cpu::compose::{self, Image};
+use pomkit_cpu::{CpuRenderer, Mode, RenderOptions, RenderOutput};
+use pomkit_io::{PixelLayout, Pixels};
+
+use crate::progress;
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// Scene file (TOML; see docs/SCENES.md). Without one, the built-in demo scene: bricks,
+    /// pyramids, cobblestones and raised text on a plane, a cube and a sphere.
+    scene: Option<PathBuf>,
+    /// Output PNG. AOVs go beside it as OUT.<name>.exr.
+    #[arg(short, long, default_value = "pomkit.png")]
+    output: PathBuf,
+    /// Use this technique on every material (flat, normal, parallax, iterative, steep,
+    /// pom-classic, pom, relief, exact) or `displaced` for the ground truth: the meshes
+    /// tessellated to the height map's resolution and displaced for real.
+    #[arg(long)]
+    technique: Option<String>,
+    /// Renderer: cpu, gpu, or auto (the GPU when an adapter exists, else the CPU).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    /// Image size.
+    #[arg(long, default_value = "1280x720")]
+    size: String,
+    /// Write these AOVs as 32-bit float EXR beside the PNG: any of uv, depth, shadow, fetches,
+    /// lod (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    aov: Vec<String>,
+    /// Samples per pixel along each axis (2 = 4 samples per pixel).
+    #[arg(long, default_value_t = 1)]
+    supersample: u32,
+    /// Render the scene once per listed technique (comma-separated; `displaced` allowed) and
+    /// write them side by side with labels; with `displaced` in the list, also print each
+    /// technique's PSNR and share of differing pixels against it.
+    #[arg(long, value_delimiter = ',')]
+    compare: Vec<String>,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    Cpu,
+    Gpu,
+    Auto,
+}
+
+/// A technique name or `displaced`.
+fn parse_mode(name: &str) -> Result<Mode> {
+    if name.eq_ignore_ascii_case("displaced") {
+        return Ok(Mode::Displaced);
+    }
+    let t: Technique = name.parse().map_err(|e| anyhow::anyhow!("--technique: {e}, displaced"))?;
+    Ok(Mode::Technique(t))
+}
+
+const AOVS: [&str; 5] = ["uv", "depth", "shadow", "fetches", "lod"];
+
+pub fn run(a: &RenderArgs) -> Result<()> {
+    let (w, h) = crate::parse_size(&a.size).context("--size")?;
+    for name in &a.aov {
+        if !AOVS.contains(&name.as_str()) {
+            bail!("--aov: unknown AOV '{name}': expected any of {}", AOVS.join(", "));
+        }
+    }
+    if !(1..=8).contains(&a.supersample) {
+        bail!("--supersample {}: must be 1 to 8", a.supersample);
+    }
+    let mode = match &a.technique {
+        Some(t) => parse_mode(t)?,
+        None => Mode::Material,
+    };
+    let modes: Vec<(String, Mode)> =
+        a.compare.iter().map(|n| Ok((n.to_ascii_lowercase(), parse_mode(n)?))).collect::<Result<_>>()?;
+    match a.backend {
+        Backend::Gpu => bail!("--backend gpu: the GPU renderer is not part of this build yet; use --backend cpu"),
+        Backend::Auto => eprintln!("backend: cpu (no GPU backend in this build)"),
+        Backend::Cpu => {}
+    }
+    pomkit_io::check_output(&a.output, PixelLayout::Rgb8)?;
+    let scene = match &a.scene {
+        Some(path) => pomkit_io::scene::load_scene(path)?,
+        None => pomkit_core::demo::demo_scene(),
+    };
+    let base = RenderOptions {
+        width: w,
+        height: h,
+        supersample: a.supersample,
+        mode,
+        aovs: !a.aov.is_empty(),
+        ..Default::default()
+    };
+    if modes.is_empty() {
+        let out = render_one(&scene, &base, "rendering")?;
+        write_png(&a.output, &image_of(&out))?;
+        if let Some(aovs) = &out.aovs {
+            write_aovs(&a.output, &out, aovs, &a.aov)?;
+        }
+        eprintln!("wrote {} ({w}x{h}, {} of {} pixels covered)", a.output.display(), out.covered, w * h);
+        return Ok(());
+    }
+    let mut panels = Vec::new();
+    for (name, m) in &modes {
+        let out = render_one(&scene, &RenderOptions { mode: *m, aovs: false, ..base }, name)?;
+        panels.push((name.clone(), image_of(&out)));
+    }
+    if let Some((_, reference)) = panels.iter().find(|(n, _)| n == "displaced").cloned() {
+        eprintln!("difference from displaced (threshold 16 of 255):");
+        for (name, img) in &mut panels {
+            if name != "displaced" {
+                let d = compose::difference(img, &reference, 16, None);
+                eprintln!("  {name:<12} PSNR {:6.2} dB, {:5.2}% of pixels differ", d.psnr_db, 100.0 * d.share_over);
+                *name = format!("{name} {:.1}db", d.psnr_db);
+            }
+        }
+    }
+    let columns = if panels.len() <= 3 { panels.len() } else { panels.len().div_ceil(2) };
+    let sheet = compose::sheet(&panels, columns, 4);
+    write_png(&a.output, &sheet)?;
+    eprintln!("wrote {} ({} panels)", a.output.display(), panels.len());
+    Ok(())
+}
+
+fn render_one(scene: &Scene, opts: &RenderOptions, what: &str) -> Result<RenderOutput> {
+    let ss = opts.supersample.max(1);
+    let pixels = u64::from(opts.width * ss) * u64::from(opts.height * ss);
+    let pb = progress::items(pixels.div_ceil(32 * 32), 64, what, "tiles");
+    let out = CpuRenderer::new()
+        .render(scene, opts, &|done, _total| pb.set_position(done as u64))
+        .with_context(|| format!("cannot render ({what})"))?;
+    pb.finish_and_clear();
+    if out.color.iter().any(|c| !c.is_finite()) {
+        bail!("internal error: the render produced a non-finite pixel");
+    }
+    Ok(out)
+}
+
+fn image_of(out: &RenderOutput) -> Image {
+    Image { width: out.width, height: out.height, pixels: out.to_srgb8() }
+}
+
+fn write_png(path: &Path, img: &Image) -> Result<()> {
+    pomkit_io::write_image(path, img.width, img.height, PixelLayout::Rgb8, Pixels::U8(img.pixels.as_flattened()))?;
+    Ok(())
+}
+
+/// `out.png` -> `out.<name>.exr`.
+fn aov_path(png: &Path, name: &str) -> PathBuf {
+    let stem = png.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "pomkit".into());
+    png.with_file_name(format!("{stem}.{name}.exr"))
+}
+
+fn write_aovs(png: &Path, out: &RenderOutput, aovs: &pomkit_cpu::Aovs, names: &[String]) -> Result<()> {
+    let (w, h) = (out.width, out.height);
+    for name in names {
+        let path = aov_path(png, name);
+        match name.as_str() {
+            "uv" => {
+                let rgb: Vec<f32> = aovs.uv.iter().flat_map(|uv| [uv.x, uv.y, 0.0]).collect();
+                pomkit_io::write_image(&path, w, h, PixelLayout::RgbF32, Pixels::F32(&rgb))?;
+            }
+            "depth" => pomkit_io::write_image(&path, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.depth))?,
+            "shadow" => pomkit_io::write_image(&path, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.shadow))?,
+            "fetches" => pomkit_io::write_image(&path, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.fetches))?,
+            "lod" => pomkit_io::write_image(&path, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.lod))?,
+            _ => unreachable!("checked against AOVS"),
+        }
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}

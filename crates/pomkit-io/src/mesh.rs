@@ -1,0 +1,471 @@
+//! Triangle meshes from files: Wavefront OBJ and glTF 2.0 (`.gltf` and `.glb`).
+//!
+//! [`load_mesh`] picks the format by the file's extension and returns one [`Mesh`]: every
+//! triangle of the file in one vertex and index buffer.
+//!
+//! # UV convention
+//!
+//! pomkit's UVs are glTF's: `(0, 0)` is the top-left corner of the image and v runs down the
+//! rows (DESIGN section 2). glTF files are read as they are. OBJ files store v *up* the image
+//! (OpenGL's convention, `(0, 0)` at the bottom-left), so the OBJ reader flips it: `v' = 1 - v`.
+//! A texture that looks right on an OBJ model in Blender or any OpenGL viewer therefore looks
+//! right in pomkit too.
+//!
+//! # What is read
+//!
+//! - **OBJ** (through `tobj`): every object and group of the file, polygons triangulated as fans,
+//!   one index per unique (position, UV, normal) corner. `vn` normals are used when every corner
+//!   has one; otherwise the normals of the whole mesh are computed (area-weighted, smooth).
+//!   Materials (`mtllib`, `usemtl`), points and lines are ignored. Tangents are computed with
+//!   MikkTSpace.
+//! - **glTF 2.0** (through `gltf`): every triangle primitive (`TRIANGLES`, `TRIANGLE_STRIP`,
+//!   `TRIANGLE_FAN`; points and lines are skipped) of every mesh instanced by the nodes of the
+//!   default scene (the first scene when none is marked default; every mesh, untransformed, when
+//!   the file has no scene), with the nodes' transforms applied. Attributes: `POSITION`,
+//!   `NORMAL`, `TEXCOORD_0` and `TANGENT`. As the glTF specification requires, a primitive
+//!   without `NORMAL` gets flat normals (its triangles no longer share vertices) and its
+//!   `TANGENT`, if any, is ignored. When every primitive has a usable `TANGENT` the tangents are
+//!   taken as given ([`Mesh::with_tangents`]); primitives without one get MikkTSpace tangents, as
+//!   glTF prescribes. A node transform that mirrors (negative determinant) reverses the winding
+//!   and the tangent handedness, so the result still has counter-clockwise front faces.
+//!   Buffers may be in the `.glb` container, in `.bin` files beside the `.gltf`, or in base64
+//!   `data:` URIs. Images, materials, skins and morph targets are ignored.
+//!
+//! A mesh must have texture coordinates: parallax mapping offsets them, so a model without UVs
+//! is an error ([`MeshLoadError::NoUvs`]), not a silently flat surface.
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::{Path, PathBuf};
+
+use pomkit_core::glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use pomkit_core::mesh::{Mesh, MeshError};
+use pomkit_core::{TangentMethod, TangentOptions, compute_tangents};
+
+/// The deepest node hierarchy followed in a glTF file (deeper ones, or cycles, are an error).
+const MAX_NODE_DEPTH: usize = 256;
+
+/// Why a mesh file could not be loaded. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshLoadError {
+    /// The file could not be opened or read.
+    #[error("cannot read {}: {reason}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's reason.
+        reason: std::io::Error,
+    },
+    /// The extension is not `.obj`, `.gltf` or `.glb`.
+    #[error("{}: unknown mesh format: expected a .obj, .gltf or .glb file", path.display())]
+    UnsupportedFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The OBJ parser refused the file (bad numbers, faces referring to missing vertices...).
+    #[error("{}: not a valid OBJ file: {reason}", path.display())]
+    Obj {
+        /// The file.
+        path: PathBuf,
+        /// The parser's reason.
+        reason: String,
+    },
+    /// The glTF parser refused the file, or its buffers could not be loaded.
+    #[error("{}: not a valid glTF 2.0 file: {reason}", path.display())]
+    Gltf {
+        /// The file.
+        path: PathBuf,
+        /// The parser's reason.
+        reason: String,
+    },
+    /// The mesh, or part of it, has no texture coordinates.
+    #[error("{} has no texture coordinates (UVs){detail}: parallax mapping needs them", path.display())]
+    NoUvs {
+        /// The file.
+        path: PathBuf,
+        /// Which part lacks them (empty when none has any), e.g. ` (mesh "rock", primitive 1)`.
+        detail: String,
+    },
+    /// The file holds no triangles.
+    #[error("{} has no triangles", path.display())]
+    NoTriangles {
+        /// The file.
+        path: PathBuf,
+    },
+    /// An attribute is inconsistent: wrong length, out-of-range index, degenerate node
+    /// transform, missing positions.
+    #[error("{}: {message}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, and where.
+        message: String,
+    },
+    /// The geometry was refused by [`Mesh`] (non-finite positions, bad indices...).
+    #[error("{}: {reason}", path.display())]
+    Mesh {
+        /// The file.
+        path: PathBuf,
+        /// The reason.
+        reason: MeshError,
+    },
+}
+
+/// Loads a triangle mesh from an OBJ (`.obj`) or glTF 2.0 (`.gltf`, `.glb`) file.
+///
+/// See the [module documentation](self) for what is read and the UV convention (OBJ's v is
+/// flipped). Normals are computed when the file has none, tangents when it has none.
+///
+/// # Errors
+/// A [`MeshLoadError`] naming the file: it cannot be read, its extension is unknown, it does
+/// not parse, it has no triangles or no UVs, or its geometry is invalid.
+pub fn load_mesh(path: &Path) -> Result<Mesh, MeshLoadError> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    if !matches!(ext.as_str(), "obj" | "gltf" | "glb") {
+        return Err(MeshLoadError::UnsupportedFormat { path: path.to_owned() });
+    }
+    let bytes = std::fs::read(path).map_err(|reason| MeshLoadError::Read { path: path.to_owned(), reason })?;
+    // The parsers are third-party code fed untrusted input: a panic in them (an arithmetic
+    // overflow on an absurd index, say) becomes an error naming the file, never a crash.
+    let parsed = catch_unwind(AssertUnwindSafe(|| match ext.as_str() {
+        "obj" => parse_obj(&bytes, path),
+        _ => parse_gltf(&bytes, path),
+    }));
+    let raw = match parsed {
+        Ok(r) => r?,
+        Err(_) => {
+            let reason = "the parser failed on malformed data".to_owned();
+            return Err(if ext == "obj" {
+                MeshLoadError::Obj { path: path.to_owned(), reason }
+            } else {
+                MeshLoadError::Gltf { path: path.to_owned(), reason }
+            });
+        }
+    };
+    raw.into_mesh(path)
+}
+
+/// Geometry gathered from a file before it becomes a [`Mesh`].
+#[derive(Default)]
+struct Raw {
+    positions: Vec<Vec3>,
+    /// Empty, or one per position.
+    normals: Vec<Vec3>,
+    uvs: Vec<Vec2>,
+    /// `Some` (one per position) when every part of the file came with tangents.
+    tangents: Option<Vec<Vec4>>,
+    indices: Vec<u32>,
+}
+
+impl Raw {
+    fn into_mesh(self, path: &Path) -> Result<Mesh, MeshLoadError> {
+        if self.indices.is_empty() {
+            return Err(MeshLoadError::NoTriangles { path: path.to_owned() });
+        }
+        let mesh_err = |reason| MeshLoadError::Mesh { path: path.to_owned(), reason };
+        let normals = (!self.normals.is_empty()).then_some(self.normals);
+        match (self.tangents, normals) {
+            (Some(tangents), Some(normals)) => {
+                Mesh::with_tangents(self.positions, Some(normals), self.uvs, self.indices, tangents).map_err(mesh_err)
+            }
+            (_, normals) => {
+                Mesh::new(self.positions, normals, self.uvs, self.indices, TangentMethod::MikkTSpace).map_err(mesh_err)
+            }
+        }
+    }
+}
+
+/// The next vertex index after `len` vertices, or an error for meshes beyond `u32` indices.
+fn base_index(len: usize, path: &Path) -> Result<u32, MeshLoadError> {
+    u32::try_from(len).map_err(|_| MeshLoadError::Invalid {
+        path: path.to_owned(),
+        message: format!("{len} vertices are more than 32-bit indices can address"),
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// OBJ
+// ---------------------------------------------------------------------------------------------
+
+/// Parses an OBJ file: all models merged, v flipped to pomkit's convention.
+fn parse_obj(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
+    let mut reader = std::io::BufReader::new(bytes);
+    // Materials are not used: refuse to open .mtl files rather than read them for nothing.
+    let (models, _materials) =
+        tobj::load_obj_buf(&mut reader, &tobj::GPU_LOAD_OPTIONS, |_| Err(tobj::LoadError::OpenFileFailed))
+            .map_err(|e| MeshLoadError::Obj { path: path.to_owned(), reason: e.to_string() })?;
+    let mut raw = Raw::default();
+    let mut all_normals = true;
+    let mut any_uvs = false;
+    let mut missing_uvs = None;
+    for model in &models {
+        let m = &model.mesh;
+        let n = m.positions.len() / 3;
+        if n == 0 || m.indices.is_empty() {
+            continue;
+        }
+        let base = base_index(raw.positions.len(), path)?;
+        raw.positions.extend(m.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
+        if m.texcoords.len() == 2 * n {
+            any_uvs = true;
+            // OBJ stores v up the image (OpenGL); pomkit's v runs down it (glTF).
+            raw.uvs.extend(m.texcoords.chunks_exact(2).map(|t| Vec2::new(t[0], 1.0 - t[1])));
+        } else {
+            any_uvs |= !m.texcoords.is_empty();
+            missing_uvs.get_or_insert_with(|| model.name.clone());
+        }
+        if m.normals.len() == 3 * n {
+            raw.normals.extend(m.normals.chunks_exact(3).map(|v| Vec3::new(v[0], v[1], v[2])));
+        } else {
+            all_normals = false;
+        }
+        for &i in &m.indices {
+            let i = base.checked_add(i).ok_or_else(|| MeshLoadError::Invalid {
+                path: path.to_owned(),
+                message: "vertex indices overflow 32 bits".to_owned(),
+            })?;
+            raw.indices.push(i);
+        }
+    }
+    if let Some(name) = missing_uvs {
+        // Either the file has no `vt` at all, or some faces lack them (tobj then stores fewer
+        // UVs than vertices).
+        let detail = if any_uvs || models.len() > 1 {
+            if name.is_empty() { " on some faces".to_owned() } else { format!(" on some faces of {name:?}") }
+        } else {
+            String::new()
+        };
+        return Err(MeshLoadError::NoUvs { path: path.to_owned(), detail });
+    }
+    if !all_normals {
+        // Some corners have no `vn`: compute every normal rather than mix the two.
+        raw.normals.clear();
+    }
+    Ok(raw)
+}
+
+// ---------------------------------------------------------------------------------------------
+// glTF
+// ---------------------------------------------------------------------------------------------
+
+/// One primitive's vertices, already in world (file) space.
+struct Part {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    uvs: Vec<Vec2>,
+    tangents: Option<Vec<Vec4>>,
+    indices: Vec<u32>,
+}
+
+/// Parses a `.gltf` or `.glb` file and gathers the triangles of its default scene.
+fn parse_gltf(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
+    let gltf_err = |reason: String| MeshLoadError::Gltf { path: path.to_owned(), reason };
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(bytes).map_err(|e| gltf_err(e.to_string()))?;
+    let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let buffers = gltf::import_buffers(&document, Some(base), blob).map_err(|e| {
+        let files: Vec<String> = document
+            .buffers()
+            .filter_map(|b| match b.source() {
+                gltf::buffer::Source::Uri(uri) if !uri.starts_with("data:") => Some(uri.to_owned()),
+                _ => None,
+            })
+            .collect();
+        if files.is_empty() {
+            gltf_err(format!("cannot load its buffers: {e}"))
+        } else {
+            gltf_err(format!("cannot load its buffers ({}): {e}", files.join(", ")))
+        }
+    })?;
+
+    // (mesh, world transform) for every mesh instance.
+    let mut instances: Vec<(gltf::Mesh<'_>, Mat4)> = Vec::new();
+    match document.default_scene().or_else(|| document.scenes().next()) {
+        Some(scene) => {
+            let mut stack: Vec<(gltf::Node<'_>, Mat4, usize)> = scene.nodes().map(|n| (n, Mat4::IDENTITY, 0)).collect();
+            while let Some((node, parent, depth)) = stack.pop() {
+                if depth > MAX_NODE_DEPTH {
+                    return Err(gltf_err(format!("the node hierarchy is deeper than {MAX_NODE_DEPTH} levels")));
+                }
+                let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+                if let Some(mesh) = node.mesh() {
+                    instances.push((mesh, world));
+                }
+                stack.extend(node.children().map(|c| (c, world, depth + 1)));
+            }
+        }
+        None => instances.extend(document.meshes().map(|m| (m, Mat4::IDENTITY))),
+    }
+
+    let mut parts = Vec::new();
+    for (mesh, world) in &instances {
+        for prim in mesh.primitives() {
+            if let Some(part) = read_primitive(&prim, mesh, *world, &buffers, path)? {
+                parts.push(part);
+            }
+        }
+    }
+    merge_parts(parts, path)
+}
+
+/// `mesh "name", primitive 2` (or `mesh 0, primitive 2` for an unnamed mesh), for messages.
+fn where_in(mesh: &gltf::Mesh<'_>, prim: usize) -> String {
+    match mesh.name() {
+        Some(name) => format!("mesh {name:?}, primitive {prim}"),
+        None => format!("mesh {}, primitive {prim}", mesh.index()),
+    }
+}
+
+/// Reads one primitive and moves it to world space; `None` for points and lines.
+fn read_primitive(
+    prim: &gltf::Primitive<'_>,
+    mesh: &gltf::Mesh<'_>,
+    world: Mat4,
+    buffers: &[gltf::buffer::Data],
+    path: &Path,
+) -> Result<Option<Part>, MeshLoadError> {
+    use gltf::mesh::Mode;
+    let invalid = |what: String| MeshLoadError::Invalid {
+        path: path.to_owned(),
+        message: format!("{}: {what}", where_in(mesh, prim.index())),
+    };
+    let mode = prim.mode();
+    if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+        return Ok(None);
+    }
+    let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+    let positions: Vec<Vec3> = reader
+        .read_positions()
+        .ok_or_else(|| invalid("no POSITION attribute (or its data lies outside its buffer)".to_owned()))?
+        .map(Vec3::from)
+        .collect();
+    let n = positions.len();
+    let uvs: Vec<Vec2> = match reader.read_tex_coords(0) {
+        Some(t) => t.into_f32().map(Vec2::from).collect(),
+        None => {
+            return Err(MeshLoadError::NoUvs {
+                path: path.to_owned(),
+                detail: format!(" ({})", where_in(mesh, prim.index())),
+            });
+        }
+    };
+    if uvs.len() != n {
+        return Err(invalid(format!("{} TEXCOORD_0 values for {n} positions", uvs.len())));
+    }
+    let normals: Option<Vec<Vec3>> = reader.read_normals().map(|r| r.map(Vec3::from).collect());
+    if let Some(len) = normals.as_ref().map(Vec::len).filter(|&len| len != n) {
+        return Err(invalid(format!("{len} NORMAL values for {n} positions")));
+    }
+    // glTF: tangents are ignored when normals are absent (flat normals are computed instead).
+    let tangents: Option<Vec<Vec4>> = match (&normals, reader.read_tangents()) {
+        (Some(_), Some(r)) => Some(r.map(Vec4::from).collect()),
+        _ => None,
+    };
+    if let Some(len) = tangents.as_ref().map(Vec::len).filter(|&len| len != n) {
+        return Err(invalid(format!("{len} TANGENT values for {n} positions")));
+    }
+    let listed: Vec<u32> = match reader.read_indices() {
+        Some(r) => r.into_u32().collect(),
+        None => (0..base_index(n, path)?).collect(),
+    };
+    if let Some(&bad) = listed.iter().find(|&&i| i as usize >= n) {
+        return Err(invalid(format!("index {bad} refers past its {n} vertices")));
+    }
+    let mut indices = triangle_list(&listed, mode);
+
+    // To world space: normals by the inverse transpose, tangents by the matrix itself; a
+    // mirroring transform flips the winding (glTF 3.7.4) and the tangents' handedness.
+    let m3 = Mat3::from_mat4(world);
+    let det = m3.determinant();
+    if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE && world.is_finite()) {
+        return Err(invalid("its node transform is degenerate (zero scale or not finite)".to_owned()));
+    }
+    let normal_matrix = m3.inverse().transpose();
+    let flip = det < 0.0;
+    let positions: Vec<Vec3> = positions.into_iter().map(|p| world.transform_point3(p)).collect();
+    let normals = normals.map(|ns| ns.into_iter().map(|v| (normal_matrix * v).normalize_or_zero()).collect());
+    let tangents = tangents.map(|ts| {
+        ts.into_iter()
+            .map(|t| {
+                let w = if t.w < 0.0 { -1.0 } else { 1.0 };
+                (m3 * t.truncate()).normalize_or_zero().extend(if flip { -w } else { w })
+            })
+            .collect()
+    });
+    if flip {
+        indices.chunks_exact_mut(3).for_each(|t| t.swap(1, 2));
+    }
+
+    let part = match normals {
+        Some(normals) => Part { positions, normals, uvs, tangents, indices },
+        None => flat_part(&positions, &uvs, &indices),
+    };
+    Ok(Some(part))
+}
+
+/// Triangle list from the indices of a `TRIANGLES`, `TRIANGLE_STRIP` or `TRIANGLE_FAN`
+/// primitive, keeping glTF's winding (specification 3.7.2.1). A trailing partial triangle is
+/// dropped.
+fn triangle_list(ix: &[u32], mode: gltf::mesh::Mode) -> Vec<u32> {
+    use gltf::mesh::Mode;
+    match mode {
+        Mode::TriangleStrip => (0..ix.len().saturating_sub(2))
+            .flat_map(|i| if i % 2 == 0 { [ix[i], ix[i + 1], ix[i + 2]] } else { [ix[i + 1], ix[i], ix[i + 2]] })
+            .collect(),
+        Mode::TriangleFan => (1..ix.len().saturating_sub(1)).flat_map(|i| [ix[i], ix[i + 1], ix[0]]).collect(),
+        _ => ix[..ix.len() / 3 * 3].to_vec(),
+    }
+}
+
+/// A primitive without normals, unwelded so that every triangle gets its own flat normal
+/// (glTF 3.7.2.1: "client implementations MUST calculate flat normals").
+fn flat_part(positions: &[Vec3], uvs: &[Vec2], indices: &[u32]) -> Part {
+    let mut part = Part {
+        positions: Vec::with_capacity(indices.len()),
+        normals: Vec::with_capacity(indices.len()),
+        uvs: Vec::with_capacity(indices.len()),
+        tangents: None,
+        indices: Vec::with_capacity(indices.len()),
+    };
+    for tri in indices.chunks_exact(3) {
+        let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| positions[i as usize]);
+        // A degenerate triangle gets a zero normal, which `Mesh` replaces by its own fallback.
+        let normal = (b - a).cross(c - a).normalize_or_zero();
+        for &i in tri {
+            part.indices.push(part.positions.len() as u32);
+            part.positions.push(positions[i as usize]);
+            part.uvs.push(uvs[i as usize]);
+            part.normals.push(normal);
+        }
+    }
+    part
+}
+
+/// Concatenates the primitives. Tangents are kept as given when every primitive has them;
+/// when only some do, the others get MikkTSpace tangents so that the given ones are kept.
+fn merge_parts(parts: Vec<Part>, path: &Path) -> Result<Raw, MeshLoadError> {
+    let any_tangents = parts.iter().any(|p| p.tangents.is_some());
+    let mut raw = Raw { tangents: any_tangents.then(Vec::new), ..Raw::default() };
+    for part in parts {
+        let base = base_index(raw.positions.len(), path)?;
+        if let Some(all) = &mut raw.tangents {
+            match &part.tangents {
+                Some(t) => all.extend_from_slice(t),
+                None => {
+                    let opts = TangentOptions { method: TangentMethod::MikkTSpace, ..TangentOptions::default() };
+                    let t = compute_tangents(&part.positions, &part.normals, &part.uvs, &part.indices, &opts)
+                        .map_err(|e| MeshLoadError::Invalid { path: path.to_owned(), message: e.to_string() })?;
+                    all.extend(t);
+                }
+            }
+        }
+        raw.positions.extend_from_slice(&part.positions);
+        raw.normals.extend_from_slice(&part.normals);
+        raw.uvs.extend_from_slice(&part.uvs);
+        for i in part.indices {
+            raw.indices.push(base.checked_add(i).ok_or_else(|| MeshLoadError::Invalid {
+                path: path.to_owned(),
+                message: "vertex indices overflow 32 bits".to_owned(),
+            })?);
+        }
+    }
+    Ok(raw)
+}

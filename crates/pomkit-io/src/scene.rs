@@ -1,0 +1,1189 @@
+//! Scene files: a camera, lights, materials and objects in TOML, loaded into a
+//! [`Scene`].
+//!
+//! [`load_scene`] reads a file; [`parse_scene`] parses text. Paths inside a scene (textures,
+//! meshes) are relative to the scene file's folder (to `base_dir` for [`parse_scene`]); absolute
+//! paths work too. Colours are linear RGB. Every error names the scene file, the table (for
+//! example `material "bricks"` or `object 2 ("floor")`) and the field, and a typo in a field
+//! name is an error, not a silently ignored line.
+//!
+//! # Format
+//!
+//! A complete scene, every field written out (the values shown for optional fields are their
+//! defaults unless the comment says otherwise):
+//!
+//! ```toml
+//! background = [0.02, 0.02, 0.03]   # linear RGB behind everything
+//! ambient = [0.05, 0.05, 0.06]      # linear RGB, multiplied by the albedo
+//!
+//! [camera]                          # required
+//! eye = [0.0, 2.0, 4.0]             # required
+//! target = [0.0, 0.0, 0.0]          # required; must differ from eye
+//! up = [0.0, 1.0, 0.0]              # must not be parallel to target - eye
+//! fov = 45.0                        # vertical field of view, degrees, in (0, 180)
+//! near = 0.05                       # near clipping distance, > 0
+//! far = 100.0                       # far clipping distance, > near
+//!
+//! [[light]]                         # any number, including none (ambient light only)
+//! type = "directional"              # "directional" or "point"
+//! direction = [0.0, 1.0, 0.0]       # directional only: toward the light (normalized on use)
+//! color = [1.0, 1.0, 1.0]
+//! intensity = 1.0                   # >= 0
+//!
+//! [[light]]
+//! type = "point"
+//! position = [0.0, 4.0, 0.0]        # point only; inverse-square falloff
+//! color = [1.0, 1.0, 1.0]
+//! intensity = 1.0                   # illuminance at distance 1
+//!
+//! [[material]]
+//! name = "bricks"                   # default "material N" (N counts from 1); names are unique
+//! albedo = "bricks_albedo.png"      # colour map (sRGB file, or linear float EXR); default white
+//! height = "bricks_height.png"      # height map; default none (the material is then flat
+//!                                   # or normal-mapped only)
+//! depth_map = false                 # the height image stores depth (white = deep)
+//! channel = "luma"                  # r, g, b, a or luma: the channel holding the height
+//! normalize = false                 # rescale the height image's values to [0, 1]
+//! normal = "bricks_normal.png"      # tangent-space normal map; default none: the renderer
+//!                                   # bakes one from the height map
+//! normal_y_down = false             # the normal map is DirectX-style (+Y down)
+//! base_color = [0.8, 0.8, 0.8]      # multiplies the albedo
+//! technique = "pom"                 # flat, normal, parallax, iterative, steep, pom-classic,
+//!                                   # pom, relief or exact
+//! depth_scale = 0.1                 # depth of the deepest point, in UV units; > 0
+//! min_samples = 8                   # pom: fewest samples (head-on)
+//! max_samples = 32                  # pom: most samples (grazing); >= min_samples
+//! samples = 32                      # steep, relief: depth planes
+//! iterations = 4                    # iterative: parallax steps
+//! binary_steps = 6                  # relief: binary refinement steps
+//! refine = 0                        # pom: secant refinement steps
+//! perspective_bias = 1.0            # pom-classic
+//! edges = "wrap"                    # wrap or clamp: texture addressing
+//! shadow = "none"                   # none, hard, soft or exact self-shadowing
+//! softness = 0.1                    # soft: light's angular radius in radians, >= 0
+//! lod_threshold = 4.0               # mip level beyond which only normal mapping is done
+//! specular = 0.25                   # Blinn-Phong strength, >= 0
+//! shininess = 32.0                  # Blinn-Phong exponent, > 0
+//! pixel_depth_offset = true         # write the displaced depth to the depth buffer
+//!
+//! [[object]]                        # at least one
+//! name = "floor"                    # default "object N"
+//! mesh = "plane"                    # required: a built-in shape or a .obj/.gltf/.glb path
+//! material = "bricks"               # required: a material's name
+//! size = [4.0, 4.0]                 # shape parameters, see below (this one: default 2)
+//! uv_repeat = [2.0, 2.0]            # texture repeats along u and v (or one number); default 1
+//! position = [0.0, 0.0, 0.0]
+//! rotation = [0.0, 45.0, 0.0]       # degrees about X, then Y, then Z (default 0)
+//! scale = [1.0, 1.0, 1.0]           # or one number; every component > 0
+//! ```
+//!
+//! # Built-in textures
+//!
+//! `albedo` and `height` also accept `"builtin:NAME"` or `"builtin:NAME:WxH"`, where NAME is a
+//! pattern of [`pomkit_core::procedural`] (bricks, pyramids, cobblestones, text, spike, waves)
+//! and `WxH` the size in texels (default 512x512, each side 1 to 8192). The built-in colour
+//! map matches the built-in height map of the same name. `depth_map`, `channel` and
+//! `normalize` describe how to read a height *image*; with a built-in height they are an
+//! error when set to anything but their defaults. `normal` takes files only.
+//!
+//! # Images
+//!
+//! Height maps are read by [`load_height_field`] (8- and 16-bit,
+//! float EXR, any channel). Colour maps in 8- or 16-bit formats are sRGB and converted to linear;
+//! float (EXR) colour maps are taken as linear; alpha is ignored. Normal maps store `n * 0.5 +
+//! 0.5` in RGB (8 or 16 bits), +Y up unless `normal_y_down`; a map whose blue channel is zero
+//! everywhere is a two-channel map (`pomkit bake normal --encoding rg8`) and z is rebuilt;
+//! float (EXR) normal maps hold the vectors themselves (`--encoding float`). Greyscale images are
+//! refused as normal maps.
+//!
+//! # Shapes
+//!
+//! `mesh` names a built-in shape of [`Mesh`] or a file loaded by [`load_mesh`] (OBJ's v is
+//! flipped, see [`crate::mesh`]). Shape parameters, each with its default, and which shapes
+//! take them (any other parameter on a shape is an error; files take none):
+//!
+//! | shape | parameters |
+//! |---|---|
+//! | `plane` (XZ, facing +Y) | `size = 2.0` (one number or `[x, z]`), `segments = 1` (per side) |
+//! | `quad` (XY, facing +Z) | `size = 2.0` (one number or `[x, y]`) |
+//! | `disc` (XZ, facing +Y) | `radius = 1.0`, `segments = 64` (at least 3) |
+//! | `cube` | `size = 2.0` (one number: the edge; use `scale` for a box) |
+//! | `sphere` | `radius = 1.0`, `rings = 32` (at least 2), `segments = 64` (at least 3) |
+//! | `cylinder` (axis Y, with caps) | `radius = 1.0`, `height = 2.0`, `segments = 64` (at least 3) |
+//! | `torus` (axis Y) | `radius = 1.0` (of the tube's centre circle), `tube_radius = 0.25`, `segments = 64` (around the axis), `tube_segments = 32` (around the tube), each count at least 3 |
+//!
+//! Lengths must be finite and positive, counts at most [`MAX_SEGMENTS`]. `uv_repeat` multiplies
+//! the UVs (with `edges = "wrap"` the texture tiles); both components must be positive.
+//!
+//! # Transforms
+//!
+//! An object's transform is `translate(position) * rotate_z * rotate_y * rotate_x *
+//! scale(scale)`: the mesh is scaled, then rotated about X, then about Y, then about Z (angles in
+//! degrees, right-handed: counter-clockwise seen from the positive end of the axis), then
+//! moved to `position`. Mirroring (negative) scales are refused.
+//!
+//! # Numbers and limits
+//!
+//! Every number must be finite (TOML allows `nan` and `inf`; they are errors here). Whole
+//! numbers may be written where decimals are expected (`fov = 45`). Sample counts above
+//! [`MAX_SAMPLES`](pomkit_core::trace::MAX_SAMPLES), and counts of 0, are clamped when tracing
+//! ([`TraceParams::sanitized`]). A displacing technique written explicitly on a material
+//! without a height map is an error (it would silently render flat).
+//!
+//! # Example
+//!
+//! A scene made only of built-in textures and shapes loads without any file:
+//!
+//! ```
+//! use pomkit_io::scene::parse_scene;
+//! use pomkit_core::Technique;
+//!
+//! let scene = parse_scene(r#"
+//!     [camera]
+//!     eye = [0.0, 2.0, 4.0]
+//!     target = [0.0, 0.0, 0.0]
+//!
+//!     [[light]]
+//!     direction = [-1.0, 1.0, 0.5]
+//!
+//!     [[material]]
+//!     name = "bricks"
+//!     albedo = "builtin:bricks:64x64"
+//!     height = "builtin:bricks:64x64"
+//!     technique = "relief"
+//!     depth_scale = 0.05
+//!
+//!     [[object]]
+//!     mesh = "plane"
+//!     size = 4.0
+//!     uv_repeat = 2.0
+//!     material = "bricks"
+//! "#, std::path::Path::new("."))?;
+//! assert_eq!(scene.materials[0].technique, Technique::Relief);
+//! assert_eq!(scene.objects[0].name, "object 1");
+//! # Ok::<(), pomkit_io::scene::SceneError>(())
+//! ```
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use image::DynamicImage;
+use pomkit_core::bake::rebuild_z;
+use pomkit_core::glam::{Mat4, Quat, Vec2, Vec3};
+use pomkit_core::mesh::{MAX_SEGMENTS, Mesh};
+use pomkit_core::procedural::{self, Pattern};
+use pomkit_core::scene::{Camera, Light, Material, NormalMap, Object, Scene, Texture, srgb_to_linear};
+use pomkit_core::trace::TraceParamError;
+use pomkit_core::{EdgeMode, HeightField, ShadowMode, Technique, TraceParams};
+use serde::Deserialize;
+
+use crate::mesh::{MeshLoadError, load_mesh};
+use crate::{Channel, HeightLoadOptions, IoError, load_height_field};
+
+/// The side of a built-in texture when the scene gives no size.
+pub const BUILTIN_SIZE: u32 = 512;
+
+/// The largest side of a built-in texture.
+pub const MAX_BUILTIN_SIZE: u32 = 8192;
+
+/// Why a scene could not be loaded. Every variant names the scene file.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The scene file could not be read (missing, unreadable, not UTF-8).
+    #[error("cannot read {}: {reason}", path.display())]
+    Read {
+        /// The scene file.
+        path: PathBuf,
+        /// The operating system's reason.
+        reason: std::io::Error,
+    },
+    /// The text is not valid TOML or does not fit the format: a syntax error, an unknown field,
+    /// a value of the wrong type, a missing required field.
+    #[error("{}", syntax_message(file, *position, context.as_deref(), field.as_deref(), message))]
+    Syntax {
+        /// The scene file.
+        file: PathBuf,
+        /// 1-based line and column (in characters) of the problem, when known.
+        position: Option<(usize, usize)>,
+        /// The table it lies in, e.g. `material "bricks"`, when it could be told.
+        context: Option<String>,
+        /// The field concerned, when it could be told.
+        field: Option<String>,
+        /// What is wrong (the TOML parser's words).
+        message: String,
+    },
+    /// A value is out of range, unknown or inconsistent (an unknown technique, a material that
+    /// is not defined, `depth_scale = 0`, a NaN, a camera looking at itself...).
+    #[error("{}: {at}: {message}", file.display())]
+    Invalid {
+        /// The scene file.
+        file: PathBuf,
+        /// The table, e.g. `material "bricks"`, `object 2 ("floor")` or `camera`.
+        at: String,
+        /// The field, e.g. `technique`.
+        field: String,
+        /// What is wrong; it names the field.
+        message: String,
+    },
+    /// A texture the scene refers to could not be loaded.
+    #[error("{}: {at}: {field}: {source}", file.display())]
+    Texture {
+        /// The scene file.
+        file: PathBuf,
+        /// The material, e.g. `material "bricks"`.
+        at: String,
+        /// `albedo`, `height` or `normal`.
+        field: String,
+        /// Why the image failed; it names the image file.
+        source: Box<IoError>,
+    },
+    /// A mesh file the scene refers to could not be loaded.
+    #[error("{}: {at}: mesh {mesh:?}: {source}", file.display())]
+    Mesh {
+        /// The scene file.
+        file: PathBuf,
+        /// The object, e.g. `object 1 ("statue")`.
+        at: String,
+        /// The `mesh` value as written.
+        mesh: String,
+        /// Why the mesh failed; it names the mesh file.
+        source: Box<MeshLoadError>,
+    },
+}
+
+impl SceneError {
+    /// The field the error is about (`technique`, `mesh`, ...), when known.
+    #[must_use]
+    pub fn field(&self) -> Option<&str> {
+        match self {
+            SceneError::Read { .. } => None,
+            SceneError::Syntax { field, .. } => field.as_deref(),
+            SceneError::Invalid { field, .. } | SceneError::Texture { field, .. } => Some(field),
+            SceneError::Mesh { .. } => Some("mesh"),
+        }
+    }
+}
+
+/// `file: line 3, column 7: material "x": field: message`, leaving out what is unknown.
+fn syntax_message(
+    file: &Path,
+    position: Option<(usize, usize)>,
+    context: Option<&str>,
+    field: Option<&str>,
+    message: &str,
+) -> String {
+    let mut s = file.display().to_string();
+    if let Some((l, c)) = position {
+        write!(s, ": line {l}, column {c}").unwrap_or_default();
+    }
+    if let Some(ctx) = context {
+        write!(s, ": {ctx}").unwrap_or_default();
+    }
+    // Name the field unless the parser's message already does (`unknown field `x``).
+    if let Some(f) = field.filter(|f| !message.contains(&format!("`{f}`"))) {
+        write!(s, ": {f}").unwrap_or_default();
+    }
+    write!(s, ": {message}").unwrap_or_default();
+    s
+}
+
+// ---------------------------------------------------------------------------------------------
+// The file's shape (serde)
+// ---------------------------------------------------------------------------------------------
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    background: Option<[f32; 3]>,
+    ambient: Option<[f32; 3]>,
+    camera: CameraFile,
+    #[serde(default)]
+    light: Vec<LightFile>,
+    #[serde(default)]
+    material: Vec<MaterialFile>,
+    #[serde(default)]
+    object: Vec<ObjectFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraFile {
+    eye: [f32; 3],
+    target: [f32; 3],
+    up: Option<[f32; 3]>,
+    fov: Option<f32>,
+    near: Option<f32>,
+    far: Option<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightFile {
+    #[serde(rename = "type")]
+    kind: Option<String>,
+    direction: Option<[f32; 3]>,
+    position: Option<[f32; 3]>,
+    color: Option<[f32; 3]>,
+    intensity: Option<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MaterialFile {
+    name: Option<String>,
+    albedo: Option<String>,
+    height: Option<String>,
+    depth_map: Option<bool>,
+    channel: Option<String>,
+    normalize: Option<bool>,
+    normal: Option<String>,
+    normal_y_down: Option<bool>,
+    base_color: Option<[f32; 3]>,
+    technique: Option<String>,
+    depth_scale: Option<f32>,
+    min_samples: Option<u32>,
+    max_samples: Option<u32>,
+    samples: Option<u32>,
+    iterations: Option<u32>,
+    binary_steps: Option<u32>,
+    refine: Option<u32>,
+    perspective_bias: Option<f32>,
+    edges: Option<String>,
+    shadow: Option<String>,
+    softness: Option<f32>,
+    lod_threshold: Option<f32>,
+    specular: Option<f32>,
+    shininess: Option<f32>,
+    pixel_depth_offset: Option<bool>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ObjectFile {
+    name: Option<String>,
+    mesh: String,
+    material: String,
+    position: Option<[f32; 3]>,
+    rotation: Option<[f32; 3]>,
+    scale: Option<NumberOr<[f32; 3]>>,
+    uv_repeat: Option<NumberOr<[f32; 2]>>,
+    size: Option<NumberOr<[f32; 2]>>,
+    radius: Option<f32>,
+    height: Option<f32>,
+    tube_radius: Option<f32>,
+    segments: Option<u32>,
+    rings: Option<u32>,
+    tube_segments: Option<u32>,
+}
+
+/// One number for every component, or one per component.
+#[derive(Deserialize, Clone, Copy)]
+#[serde(untagged, expecting = "expected a number or an array of numbers")]
+enum NumberOr<A> {
+    One(f32),
+    Each(A),
+}
+
+// ---------------------------------------------------------------------------------------------
+// Loading
+// ---------------------------------------------------------------------------------------------
+
+/// Loads a scene file. Relative paths in it are relative to its folder.
+///
+/// # Errors
+/// A [`SceneError`] naming `path`, the table and the field: the file cannot be read, is not
+/// valid TOML, has an unknown field or a value of the wrong type or out of range, refers to an
+/// undefined material, or a texture or mesh it names cannot be loaded.
+pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|reason| SceneError::Read { path: path.to_owned(), reason })?;
+    let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    parse_scene_named(&text, path, base)
+}
+
+/// Parses scene text; relative paths are resolved against `base_dir`. Errors name the scene
+/// `<scene>`; see [`parse_scene_named`] to give it a name.
+///
+/// # Errors
+/// As [`load_scene`].
+pub fn parse_scene(text: &str, base_dir: &Path) -> Result<Scene, SceneError> {
+    parse_scene_named(text, Path::new("<scene>"), base_dir)
+}
+
+/// Parses scene text, naming it `file` in errors; relative paths are resolved against
+/// `base_dir`.
+///
+/// # Errors
+/// As [`load_scene`].
+pub fn parse_scene_named(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
+    let parsed: SceneFile = toml::from_str(text).map_err(|e| syntax_error(file, text, &e))?;
+    let mut loader =
+        Loader { file, base: base_dir, heights: HashMap::new(), albedos: HashMap::new(), meshes: HashMap::new() };
+    loader.scene(parsed)
+}
+
+/// Turns a TOML error into a [`SceneError::Syntax`] with line, table and field.
+fn syntax_error(file: &Path, text: &str, err: &toml::de::Error) -> SceneError {
+    let message = friendlier(err.message().trim());
+    let mut out = (None, None, None);
+    if let Some(span) = err.span() {
+        let start = (0..=span.start.min(text.len())).rev().find(|&i| text.is_char_boundary(i)).unwrap_or(0);
+        let before = &text[..start];
+        let line = before.matches('\n').count() + 1;
+        let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+        let line_text = text.lines().nth(line - 1).unwrap_or("");
+        out = (Some((line, column)), table_at(text, line), key_of(line_text, column, &message));
+    }
+    let (position, context, field) = out;
+    SceneError::Syntax { file: file.to_owned(), position, context, field, message }
+}
+
+/// Serde's type names in plainer words.
+fn friendlier(message: &str) -> String {
+    message
+        .replace("expected f32", "expected a number")
+        .replace("expected u32", "expected a whole number from 0 to 4294967295")
+        .replace("expected a boolean", "expected true or false")
+        .replace("expected a string", "expected a quoted string")
+}
+
+/// The key of a `key = value` line when `column` (1-based, in characters) points into the value,
+/// as it does for a value of the wrong type, or when the key itself is the problem (a duplicate).
+/// (A missing field's error points at the start of its table, whose first key is innocent.)
+fn key_of(line: &str, column: usize, message: &str) -> Option<String> {
+    let (key, _) = line.split_once('=')?;
+    if key.chars().count() >= column && !message.starts_with("duplicate key") {
+        return None;
+    }
+    let key = key.trim().trim_matches('"');
+    let ok = !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    ok.then(|| key.to_owned())
+}
+
+/// The table holding line `line` (1-based): `camera`, `light 2`, `material "bricks"`, ... found
+/// from the headers above it (names of materials and objects looked up in the TOML when it
+/// parses as plain TOML).
+fn table_at(text: &str, line: usize) -> Option<String> {
+    let mut current: Option<(String, usize)> = None;
+    let mut counts: HashMap<String, usize> = HashMap::new();
+    for l in text.lines().take(line) {
+        let l = l.split('#').next().unwrap_or("").trim();
+        let (inner, array) = if let Some(i) = l.strip_prefix("[[").and_then(|r| r.strip_suffix("]]")) {
+            (i.trim(), true)
+        } else if let Some(i) = l.strip_prefix('[').and_then(|r| r.strip_suffix(']')) {
+            (i.trim(), false)
+        } else {
+            continue;
+        };
+        // Headers are keys; lines of a multi-line array of numbers are not.
+        if !inner.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_' || c == '"') {
+            continue;
+        }
+        let name = inner.trim_matches('"').to_owned();
+        let k = if array {
+            let c = counts.entry(name.clone()).or_insert(0);
+            *c += 1;
+            *c
+        } else {
+            0
+        };
+        current = Some((name, k));
+    }
+    let (name, k) = current?;
+    if k == 0 {
+        return Some(name);
+    }
+    let named = toml::from_str::<toml::Table>(text)
+        .ok()
+        .and_then(|t| t.get(&name)?.as_array()?.get(k - 1)?.get("name")?.as_str().map(str::to_owned));
+    Some(match (name.as_str(), named) {
+        ("material", Some(n)) => format!("material {n:?}"),
+        ("object", Some(n)) => format!("object {k} ({n:?})"),
+        (_, _) => format!("{name} {k}"),
+    })
+}
+
+/// Where a texture comes from.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+enum Source {
+    File(PathBuf),
+    Builtin(Pattern, u32, u32),
+}
+
+/// The scene under construction, with caches so that a texture or mesh file used twice is
+/// loaded once (and shared through `Arc`).
+struct Loader<'a> {
+    file: &'a Path,
+    base: &'a Path,
+    heights: HashMap<(Source, bool, Channel, bool), Arc<HeightField>>,
+    albedos: HashMap<Source, Arc<Texture>>,
+    meshes: HashMap<PathBuf, Arc<Mesh>>,
+}
+
+impl Loader<'_> {
+    fn invalid(&self, at: &str, field: &str, message: impl Into<String>) -> SceneError {
+        SceneError::Invalid {
+            file: self.file.to_owned(),
+            at: at.to_owned(),
+            field: field.to_owned(),
+            message: message.into(),
+        }
+    }
+
+    /// A finite vector.
+    fn vec3(&self, at: &str, field: &str, v: [f32; 3]) -> Result<Vec3, SceneError> {
+        let v = Vec3::from(v);
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.invalid(at, field, format!("{field} is {v}: every component must be finite")))
+        }
+    }
+
+    /// A finite colour with no negative component.
+    fn color(&self, at: &str, field: &str, v: [f32; 3]) -> Result<Vec3, SceneError> {
+        let c = self.vec3(at, field, v)?;
+        if c.min_element() < 0.0 {
+            return Err(self.invalid(at, field, format!("{field} is {c}: colour components must not be negative")));
+        }
+        Ok(c)
+    }
+
+    /// A finite number at least `min` (or above it when `strict`).
+    fn number(&self, at: &str, field: &str, v: f32, min: f32, strict: bool) -> Result<f32, SceneError> {
+        let ok = v.is_finite() && if strict { v > min } else { v >= min };
+        if ok {
+            return Ok(v);
+        }
+        let bound = if strict { format!("greater than {min}") } else { format!("at least {min}") };
+        Err(self.invalid(at, field, format!("{field} is {v}: it must be a finite number {bound}")))
+    }
+
+    fn scene(&mut self, f: SceneFile) -> Result<Scene, SceneError> {
+        let background = self.color("scene", "background", f.background.unwrap_or([0.02, 0.02, 0.03]))?;
+        let ambient = self.color("scene", "ambient", f.ambient.unwrap_or([0.05, 0.05, 0.06]))?;
+        let camera = self.camera(&f.camera)?;
+        let lights = f.light.iter().enumerate().map(|(i, l)| self.light(i, l)).collect::<Result<Vec<_>, _>>()?;
+        let mut materials: Vec<Material> = Vec::with_capacity(f.material.len());
+        for (i, m) in f.material.iter().enumerate() {
+            let material = self.material(i, m)?;
+            if materials.iter().any(|other| other.name == material.name) {
+                let at = format!("material {} ({:?})", i + 1, material.name);
+                return Err(self.invalid(
+                    &at,
+                    "name",
+                    format!("name {:?} is used by an earlier material", material.name),
+                ));
+            }
+            materials.push(material);
+        }
+        if f.object.is_empty() {
+            return Err(self.invalid("scene", "object", "the scene has no [[object]]: it needs at least one"));
+        }
+        let objects =
+            f.object.iter().enumerate().map(|(i, o)| self.object(i, o, &materials)).collect::<Result<Vec<_>, _>>()?;
+        Ok(Scene { camera, lights, materials, objects, ambient, background })
+    }
+
+    fn camera(&self, c: &CameraFile) -> Result<Camera, SceneError> {
+        let at = "camera";
+        let d = Camera::default();
+        let eye = self.vec3(at, "eye", c.eye)?;
+        let target = self.vec3(at, "target", c.target)?;
+        let up = self.vec3(at, "up", c.up.unwrap_or(d.up.to_array()))?;
+        let fov_y_deg = c.fov.unwrap_or(d.fov_y_deg);
+        if !(fov_y_deg.is_finite() && fov_y_deg > 0.0 && fov_y_deg < 180.0) {
+            return Err(self.invalid(at, "fov", format!("fov is {fov_y_deg}: it must be between 0 and 180 degrees")));
+        }
+        let near = self.number(at, "near", c.near.unwrap_or(d.near), 0.0, true)?;
+        let far = c.far.unwrap_or(d.far);
+        if !(far.is_finite() && far > near) {
+            return Err(self.invalid(
+                at,
+                "far",
+                format!("far is {far}: it must be finite and greater than near ({near})"),
+            ));
+        }
+        let view = target - eye;
+        if view.length_squared() <= f32::MIN_POSITIVE || !view.is_finite() {
+            return Err(self.invalid(at, "target", format!("target {target} equals eye: the camera looks nowhere")));
+        }
+        if view.normalize().cross(up.normalize_or_zero()).length_squared() < 1e-10 {
+            return Err(self.invalid(
+                at,
+                "up",
+                format!("up is {up}: it must not be zero or parallel to the view direction {}", view.normalize()),
+            ));
+        }
+        Ok(Camera { eye, target, up, fov_y_deg, near, far })
+    }
+
+    fn light(&self, i: usize, l: &LightFile) -> Result<Light, SceneError> {
+        let at = format!("light {}", i + 1);
+        let color = self.color(&at, "color", l.color.unwrap_or([1.0; 3]))?;
+        let intensity = self.number(&at, "intensity", l.intensity.unwrap_or(1.0), 0.0, false)?;
+        match l.kind.as_deref().unwrap_or("directional") {
+            "directional" => {
+                if l.position.is_some() {
+                    return Err(self.invalid(
+                        &at,
+                        "position",
+                        "position applies to point lights (type = \"point\") only",
+                    ));
+                }
+                let direction = self.vec3(&at, "direction", l.direction.unwrap_or([0.0, 1.0, 0.0]))?;
+                if direction.length_squared() <= f32::MIN_POSITIVE {
+                    return Err(self.invalid(&at, "direction", "direction is zero: it must point toward the light"));
+                }
+                Ok(Light::Directional { direction, color, intensity })
+            }
+            "point" => {
+                if l.direction.is_some() {
+                    return Err(self.invalid(&at, "direction", "direction applies to directional lights only"));
+                }
+                let position = self.vec3(&at, "position", l.position.unwrap_or([0.0, 4.0, 0.0]))?;
+                Ok(Light::Point { position, color, intensity })
+            }
+            other => {
+                Err(self.invalid(&at, "type", format!("type {other:?} is unknown: expected directional or point")))
+            }
+        }
+    }
+
+    fn material(&mut self, i: usize, m: &MaterialFile) -> Result<Material, SceneError> {
+        let name = m.name.clone().unwrap_or_else(|| format!("material {}", i + 1));
+        let at = match &m.name {
+            Some(n) => format!("material {n:?}"),
+            None => format!("material {}", i + 1),
+        };
+        let at = at.as_str();
+        let d = Material::default();
+        let td = TraceParams::default();
+
+        let technique = match &m.technique {
+            Some(t) => t.parse::<Technique>().map_err(|_| {
+                let names: Vec<&str> = Technique::ALL.iter().map(|t| t.name()).collect();
+                self.invalid(
+                    at,
+                    "technique",
+                    format!("technique {t:?} is unknown: expected one of {}", names.join(", ")),
+                )
+            })?,
+            None => d.technique,
+        };
+        let edges = match m.edges.as_deref() {
+            None => td.edges,
+            Some(e) if e.eq_ignore_ascii_case("wrap") => EdgeMode::Wrap,
+            Some(e) if e.eq_ignore_ascii_case("clamp") => EdgeMode::Clamp,
+            Some(e) => {
+                return Err(self.invalid(at, "edges", format!("edges {e:?} is unknown: expected wrap or clamp")));
+            }
+        };
+        let shadow_mode = match &m.shadow {
+            Some(s) => s.parse::<ShadowMode>().map_err(|_| {
+                let names: Vec<&str> = ShadowMode::ALL.iter().map(|m| m.name()).collect();
+                self.invalid(at, "shadow", format!("shadow {s:?} is unknown: expected one of {}", names.join(", ")))
+            })?,
+            None => d.shadow.mode,
+        };
+        let channel = match &m.channel {
+            Some(c) => c.parse::<Channel>().map_err(|_| {
+                let names: Vec<&str> = Channel::ALL.iter().map(|c| c.name()).collect();
+                self.invalid(at, "channel", format!("channel {c:?} is unknown: expected one of {}", names.join(", ")))
+            })?,
+            None => Channel::Luma,
+        };
+
+        let trace = TraceParams {
+            depth_scale: m.depth_scale.unwrap_or(td.depth_scale),
+            min_samples: m.min_samples.unwrap_or(td.min_samples),
+            max_samples: m.max_samples.unwrap_or(td.max_samples),
+            samples: m.samples.unwrap_or(td.samples),
+            iterations: m.iterations.unwrap_or(td.iterations),
+            binary_steps: m.binary_steps.unwrap_or(td.binary_steps),
+            refine: m.refine.unwrap_or(td.refine),
+            perspective_bias: m.perspective_bias.unwrap_or(td.perspective_bias),
+            edges,
+            lod: td.lod,
+        };
+        trace.validate().map_err(|e| {
+            let field = match e {
+                TraceParamError::DepthScale(_) => "depth_scale",
+                TraceParamError::PerspectiveBias(_) => "perspective_bias",
+                TraceParamError::SampleBounds { .. } => "min_samples",
+                _ => "trace parameters",
+            };
+            self.invalid(at, field, e.to_string())
+        })?;
+        let mut shadow = d.shadow;
+        shadow.mode = shadow_mode;
+        shadow.softness = self.number(at, "softness", m.softness.unwrap_or(d.shadow.softness), 0.0, false)?;
+        let lod_threshold = self.number(at, "lod_threshold", m.lod_threshold.unwrap_or(d.lod_threshold), 0.0, false)?;
+        let specular = self.number(at, "specular", m.specular.unwrap_or(d.specular), 0.0, false)?;
+        let shininess = self.number(at, "shininess", m.shininess.unwrap_or(d.shininess), 0.0, true)?;
+        let base_color = match m.base_color {
+            Some(c) => self.color(at, "base_color", c)?,
+            None => d.base_color,
+        };
+
+        // Textures.
+        let height = match &m.height {
+            Some(h) => {
+                let source = self.source(at, "height", h)?;
+                let opts = HeightLoadOptions {
+                    depth_map: m.depth_map.unwrap_or(false),
+                    channel,
+                    normalize: m.normalize.unwrap_or(false),
+                };
+                if matches!(source, Source::Builtin(..)) {
+                    let set = [
+                        ("depth_map", opts.depth_map),
+                        ("channel", opts.channel != Channel::Luma),
+                        ("normalize", opts.normalize),
+                    ];
+                    if let Some((field, _)) = set.into_iter().find(|(_, on)| *on) {
+                        return Err(self.invalid(
+                            at,
+                            field,
+                            format!("{field} describes how to read a height image: it does not apply to {h:?}"),
+                        ));
+                    }
+                }
+                Some(self.height(at, source, opts)?)
+            }
+            None => {
+                let set = [
+                    ("depth_map", m.depth_map.is_some()),
+                    ("channel", m.channel.is_some()),
+                    ("normalize", m.normalize.is_some()),
+                ];
+                if let Some((field, _)) = set.into_iter().find(|(_, on)| *on) {
+                    return Err(self.invalid(at, field, format!("{field} is set but the material has no height map")));
+                }
+                if let Some(t) = m.technique.as_ref().filter(|_| technique.displaces()) {
+                    return Err(self.invalid(
+                        at,
+                        "technique",
+                        format!(
+                            "technique {t:?} displaces by a height map, but the material has none: add height = ..."
+                        ),
+                    ));
+                }
+                None
+            }
+        };
+        let albedo = match &m.albedo {
+            Some(a) => {
+                let source = self.source(at, "albedo", a)?;
+                Some(self.albedo(at, source)?)
+            }
+            None => None,
+        };
+        let normal_map = match &m.normal {
+            Some(n) => {
+                let y_down = m.normal_y_down.unwrap_or(false);
+                match self.source(at, "normal", n)? {
+                    Source::File(path) => {
+                        Some(Arc::new(load_normal_map(&path, y_down).map_err(|source| SceneError::Texture {
+                            file: self.file.to_owned(),
+                            at: at.to_owned(),
+                            field: "normal".to_owned(),
+                            source: Box::new(source),
+                        })?))
+                    }
+                    Source::Builtin(..) => {
+                        return Err(self.invalid(
+                            at,
+                            "normal",
+                            format!("normal {n:?}: there are no built-in normal maps; leave normal out to bake one from height"),
+                        ));
+                    }
+                }
+            }
+            None => {
+                if m.normal_y_down.is_some() {
+                    return Err(self.invalid(
+                        at,
+                        "normal_y_down",
+                        "normal_y_down is set but the material has no normal map",
+                    ));
+                }
+                None
+            }
+        };
+
+        Ok(Material {
+            name,
+            albedo,
+            base_color,
+            normal_map,
+            height,
+            technique,
+            trace,
+            shadow,
+            lod_threshold,
+            specular,
+            shininess,
+            pixel_depth_offset: m.pixel_depth_offset.unwrap_or(d.pixel_depth_offset),
+        })
+    }
+
+    /// Parses a texture reference: a path (relative to the scene) or `builtin:NAME[:WxH]`.
+    fn source(&self, at: &str, field: &str, value: &str) -> Result<Source, SceneError> {
+        if value.trim().is_empty() {
+            return Err(self.invalid(at, field, format!("{field} is empty: expected a file name or builtin:NAME")));
+        }
+        let Some(rest) = value.strip_prefix("builtin:") else {
+            return Ok(Source::File(self.base.join(value)));
+        };
+        let (name, size) = match rest.split_once(':') {
+            Some((n, s)) => (n, Some(s)),
+            None => (rest, None),
+        };
+        let pattern = name.parse::<Pattern>().map_err(|_| {
+            let names: Vec<&str> = Pattern::ALL.iter().map(|p| p.name()).collect();
+            self.invalid(
+                at,
+                field,
+                format!("{field} {value:?}: unknown built-in {name:?}: expected one of {}", names.join(", ")),
+            )
+        })?;
+        let (w, h) = match size {
+            None => (BUILTIN_SIZE, BUILTIN_SIZE),
+            Some(s) => {
+                let parsed = s
+                    .split_once(['x', 'X'])
+                    .and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
+                match parsed {
+                    Some((w, h)) if (1..=MAX_BUILTIN_SIZE).contains(&w) && (1..=MAX_BUILTIN_SIZE).contains(&h) => {
+                        (w, h)
+                    }
+                    _ => {
+                        return Err(self.invalid(
+                            at,
+                            field,
+                            format!(
+                                "{field} {value:?}: size {s:?} must be WxH with each side from 1 to {MAX_BUILTIN_SIZE}"
+                            ),
+                        ));
+                    }
+                }
+            }
+        };
+        Ok(Source::Builtin(pattern, w, h))
+    }
+
+    fn height(&mut self, at: &str, source: Source, opts: HeightLoadOptions) -> Result<Arc<HeightField>, SceneError> {
+        let key = (source, opts.depth_map, opts.channel, opts.normalize);
+        if let Some(f) = self.heights.get(&key) {
+            return Ok(f.clone());
+        }
+        let field = match &key.0 {
+            Source::Builtin(p, w, h) => procedural::generate(*p, *w, *h),
+            Source::File(path) => load_height_field(path, &opts).map_err(|source| SceneError::Texture {
+                file: self.file.to_owned(),
+                at: at.to_owned(),
+                field: "height".to_owned(),
+                source: Box::new(source),
+            })?,
+        };
+        let field = Arc::new(field);
+        self.heights.insert(key, field.clone());
+        Ok(field)
+    }
+
+    fn albedo(&mut self, at: &str, source: Source) -> Result<Arc<Texture>, SceneError> {
+        if let Some(t) = self.albedos.get(&source) {
+            return Ok(t.clone());
+        }
+        let texture = match &source {
+            Source::Builtin(p, w, h) => {
+                let px = procedural::albedo(*p, *w, *h);
+                Texture::from_srgb8(*w, *h, &px)
+                    .ok_or_else(|| self.invalid(at, "albedo", "the built-in colour map has the wrong size"))?
+            }
+            Source::File(path) => load_color_texture(path).map_err(|source| SceneError::Texture {
+                file: self.file.to_owned(),
+                at: at.to_owned(),
+                field: "albedo".to_owned(),
+                source: Box::new(source),
+            })?,
+        };
+        let texture = Arc::new(texture);
+        self.albedos.insert(source, texture.clone());
+        Ok(texture)
+    }
+
+    fn object(&mut self, i: usize, o: &ObjectFile, materials: &[Material]) -> Result<Object, SceneError> {
+        let name = o.name.clone().unwrap_or_else(|| format!("object {}", i + 1));
+        let at = match &o.name {
+            Some(n) => format!("object {} ({n:?})", i + 1),
+            None => format!("object {}", i + 1),
+        };
+        let at = at.as_str();
+        let material = materials.iter().position(|m| m.name == o.material).ok_or_else(|| {
+            let names: Vec<&str> = materials.iter().map(|m| m.name.as_str()).collect();
+            let known = if names.is_empty() {
+                "there are no [[material]] tables".to_owned()
+            } else {
+                format!("materials: {}", names.join(", "))
+            };
+            self.invalid(at, "material", format!("material {:?} is not defined ({known})", o.material))
+        })?;
+
+        let position = self.vec3(at, "position", o.position.unwrap_or([0.0; 3]))?;
+        let rotation = self.vec3(at, "rotation", o.rotation.unwrap_or([0.0; 3]))?;
+        let scale = match o.scale {
+            None => Vec3::ONE,
+            Some(NumberOr::One(s)) => Vec3::splat(s),
+            Some(NumberOr::Each(s)) => Vec3::from(s),
+        };
+        if !(scale.is_finite() && scale.min_element() > 0.0) {
+            return Err(self.invalid(
+                at,
+                "scale",
+                format!("scale is {scale}: every component must be finite and greater than 0"),
+            ));
+        }
+        let uv_repeat = match o.uv_repeat {
+            None => Vec2::ONE,
+            Some(NumberOr::One(r)) => Vec2::splat(r),
+            Some(NumberOr::Each(r)) => Vec2::from(r),
+        };
+        if !(uv_repeat.is_finite() && uv_repeat.min_element() > 0.0) {
+            return Err(self.invalid(
+                at,
+                "uv_repeat",
+                format!("uv_repeat is {uv_repeat}: both components must be finite and greater than 0"),
+            ));
+        }
+
+        let mesh = self.mesh(at, o)?;
+        let mesh = if uv_repeat == Vec2::ONE { mesh } else { Arc::new((*mesh).clone().scale_uvs(uv_repeat)) };
+        let r = rotation * (std::f32::consts::PI / 180.0);
+        // X first, then Y, then Z (extrinsic): R = Rz * Ry * Rx.
+        let rotation = Quat::from_rotation_z(r.z) * Quat::from_rotation_y(r.y) * Quat::from_rotation_x(r.x);
+        let transform = Mat4::from_scale_rotation_translation(scale, rotation, position);
+        Ok(Object { name, mesh, material, transform })
+    }
+
+    /// The object's mesh: a built-in shape with its parameters, or a file (cached).
+    fn mesh(&mut self, at: &str, o: &ObjectFile) -> Result<Arc<Mesh>, SceneError> {
+        let shape = o.mesh.trim().to_ascii_lowercase();
+        let given: [(&str, bool); 7] = [
+            ("size", o.size.is_some()),
+            ("radius", o.radius.is_some()),
+            ("height", o.height.is_some()),
+            ("tube_radius", o.tube_radius.is_some()),
+            ("segments", o.segments.is_some()),
+            ("rings", o.rings.is_some()),
+            ("tube_segments", o.tube_segments.is_some()),
+        ];
+        let takes: &[&str] = match shape.as_str() {
+            "plane" => &["size", "segments"],
+            "quad" => &["size"],
+            "disc" => &["radius", "segments"],
+            "cube" => &["size"],
+            "sphere" => &["radius", "rings", "segments"],
+            "cylinder" => &["radius", "height", "segments"],
+            "torus" => &["radius", "tube_radius", "segments", "tube_segments"],
+            _ => &[],
+        };
+        if let Some((field, _)) = given.iter().find(|(f, set)| *set && !takes.contains(f)) {
+            let what = if takes.is_empty() && !is_shape(&shape) {
+                format!("{field} applies to built-in shapes, not to the mesh file {:?}", o.mesh)
+            } else if takes.is_empty() {
+                format!("{field} does not apply to mesh {shape:?} (it takes no parameters)")
+            } else {
+                format!("{field} does not apply to mesh {shape:?} (it takes: {})", takes.join(", "))
+            };
+            return Err(self.invalid(at, field, what));
+        }
+        let length = |field: &str, v: Option<f32>, default: f32| -> Result<f32, SceneError> {
+            self.number(at, field, v.unwrap_or(default), 0.0, true)
+        };
+        let count = |field: &str, v: Option<u32>, default: u32, min: u32| -> Result<u32, SceneError> {
+            let n = v.unwrap_or(default);
+            if (min..=MAX_SEGMENTS).contains(&n) {
+                Ok(n)
+            } else {
+                Err(self.invalid(at, field, format!("{field} is {n}: mesh {shape:?} needs {min} to {MAX_SEGMENTS}")))
+            }
+        };
+        let size2 = |default: f32| -> Result<Vec2, SceneError> {
+            let s = match o.size {
+                None => Vec2::splat(default),
+                Some(NumberOr::One(s)) => Vec2::splat(s),
+                Some(NumberOr::Each(s)) => Vec2::from(s),
+            };
+            if s.is_finite() && s.min_element() > 0.0 {
+                Ok(s)
+            } else {
+                Err(self.invalid(at, "size", format!("size is {s}: both components must be finite and greater than 0")))
+            }
+        };
+        let mesh = match shape.as_str() {
+            "plane" => Mesh::plane(size2(2.0)?, count("segments", o.segments, 1, 1)?),
+            "quad" => Mesh::quad(size2(2.0)?),
+            "disc" => Mesh::disc(length("radius", o.radius, 1.0)?, count("segments", o.segments, 64, 3)?),
+            "cube" => {
+                let s = match o.size {
+                    None => 2.0,
+                    Some(NumberOr::One(s)) => s,
+                    Some(NumberOr::Each(_)) => {
+                        return Err(self.invalid(
+                            at,
+                            "size",
+                            "size of a cube is one number (the edge); use scale for a box",
+                        ));
+                    }
+                };
+                Mesh::cube(length("size", Some(s), 2.0)?)
+            }
+            "sphere" => Mesh::uv_sphere(
+                length("radius", o.radius, 1.0)?,
+                count("rings", o.rings, 32, 2)?,
+                count("segments", o.segments, 64, 3)?,
+            ),
+            "cylinder" => Mesh::cylinder(
+                length("radius", o.radius, 1.0)?,
+                length("height", o.height, 2.0)?,
+                count("segments", o.segments, 64, 3)?,
+            ),
+            "torus" => Mesh::torus(
+                length("radius", o.radius, 1.0)?,
+                length("tube_radius", o.tube_radius, 0.25)?,
+                count("segments", o.segments, 64, 3)?,
+                count("tube_segments", o.tube_segments, 32, 3)?,
+            ),
+            _ => return self.mesh_file(at, &o.mesh),
+        };
+        Ok(Arc::new(mesh))
+    }
+
+    fn mesh_file(&mut self, at: &str, value: &str) -> Result<Arc<Mesh>, SceneError> {
+        let path = self.base.join(value);
+        if let Some(m) = self.meshes.get(&path) {
+            return Ok(m.clone());
+        }
+        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+        if !matches!(ext.as_deref(), Some("obj" | "gltf" | "glb")) {
+            return Err(self.invalid(
+                at,
+                "mesh",
+                format!(
+                    "mesh {value:?} is neither a built-in shape (plane, quad, disc, cube, sphere, cylinder, torus) \
+                     nor a .obj, .gltf or .glb file"
+                ),
+            ));
+        }
+        let mesh = load_mesh(&path).map_err(|source| SceneError::Mesh {
+            file: self.file.to_owned(),
+            at: at.to_owned(),
+            mesh: value.to_owned(),
+            source: Box::new(source),
+        })?;
+        let mesh = Arc::new(mesh);
+        self.meshes.insert(path, mesh.clone());
+        Ok(mesh)
+    }
+}
+
+/// Whether `name` (lowercase) is a built-in shape.
+fn is_shape(name: &str) -> bool {
+    matches!(name, "plane" | "quad" | "disc" | "cube" | "sphere" | "cylinder" | "torus")
+}
+
+// ---------------------------------------------------------------------------------------------
+// Colour and normal maps
+// ---------------------------------------------------------------------------------------------
+
+/// Opens and decodes an image, refusing empty ones.
+fn open_image(path: &Path) -> Result<DynamicImage, IoError> {
+    let bytes = std::fs::read(path).map_err(|reason| IoError::Read { path: path.to_owned(), reason })?;
+    let img = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|reason| IoError::Read { path: path.to_owned(), reason })?
+        .decode()
+        .map_err(|reason| IoError::Decode { path: path.to_owned(), reason })?;
+    if img.width() == 0 || img.height() == 0 {
+        return Err(IoError::Empty { path: path.to_owned(), width: img.width(), height: img.height() });
+    }
+    Ok(img)
+}
+
+/// Whether the image stores floats (taken as linear values rather than sRGB codes).
+fn is_float(img: &DynamicImage) -> bool {
+    matches!(img, DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_))
+}
+
+/// Loads a colour map: 8- and 16-bit images are sRGB and converted to linear, float (EXR)
+/// images are linear already (non-finite or negative values become 0). Alpha is ignored;
+/// greyscale images give grey.
+///
+/// # Errors
+/// [`IoError::Read`], [`IoError::Decode`] or [`IoError::Empty`], naming `path`.
+pub fn load_color_texture(path: &Path) -> Result<Texture, IoError> {
+    let img = open_image(path)?;
+    let (w, h) = (img.width(), img.height());
+    let texture = match &img {
+        DynamicImage::ImageLuma8(_)
+        | DynamicImage::ImageLumaA8(_)
+        | DynamicImage::ImageRgb8(_)
+        | DynamicImage::ImageRgba8(_) => {
+            let rgb = img.to_rgb8();
+            let px: Vec<[u8; 3]> = rgb.pixels().map(|p| p.0).collect();
+            Texture::from_srgb8(w, h, &px)
+        }
+        _ => {
+            let float = is_float(&img);
+            let rgb = img.to_rgb32f();
+            let texels = rgb
+                .pixels()
+                .map(|p| {
+                    Vec3::from(p.0.map(|c| {
+                        let c = if c.is_finite() { c.max(0.0) } else { 0.0 };
+                        if float { c } else { srgb_to_linear(c.min(1.0)) }
+                    }))
+                })
+                .collect();
+            Texture::new(w, h, texels)
+        }
+    };
+    texture.ok_or_else(|| IoError::Empty { path: path.to_owned(), width: w, height: h })
+}
+
+/// Loads a tangent-space normal map (+Y up, or +Y down when `y_down`, which is flipped to
+/// pomkit's +Y up).
+///
+/// 8- and 16-bit RGB images hold `n * 0.5 + 0.5`; when the blue channel is zero everywhere the
+/// map is a two-channel one and z is rebuilt from x and y. Float (EXR) images hold the vectors
+/// themselves. Vectors are renormalized; unusable ones become +Z.
+///
+/// # Errors
+/// [`IoError::Read`], [`IoError::Decode`], [`IoError::Empty`], or
+/// [`IoError::UnsupportedPixels`] for a greyscale image (probably a height map), naming
+/// `path`.
+pub fn load_normal_map(path: &Path, y_down: bool) -> Result<NormalMap, IoError> {
+    let img = open_image(path)?;
+    if !img.color().has_color() {
+        return Err(IoError::UnsupportedPixels {
+            path: path.to_owned(),
+            format: format!("{:?}: a normal map needs RGB (is this a height map?)", img.color()),
+        });
+    }
+    let (w, h) = (img.width(), img.height());
+    let float = is_float(&img);
+    let rgb = img.to_rgb32f();
+    let two_channel = !float && rgb.pixels().all(|p| p.0[2] == 0.0);
+    let normals = rgb
+        .pixels()
+        .map(|p| {
+            let [x, y, z] = if float { p.0 } else { p.0.map(|c| c * 2.0 - 1.0) };
+            let y = if y_down { -y } else { y };
+            if two_channel { rebuild_z(Vec2::new(x, y)) } else { Vec3::new(x, y, z) }
+        })
+        .collect();
+    NormalMap::new(w, h, normals).ok_or_else(|| IoError::Empty { path: path.to_owned(), width: w, height: h })
+}
