@@ -243,3 +243,76 @@ fn error_grows_in_the_expected_order_at_70_degrees() {
     // fraction of a texel.
     assert!(report[4].1 < 0.1, "{report:?}");
 }
+
+/// Pixel depth offset: a small green plate just below the polygon of a flat-bottomed parallax
+/// floor lies *above* the displaced surface, so with the offset written to the depth buffer the
+/// plate shows; without it the undisplaced polygon hides the plate.
+#[test]
+fn pixel_depth_offset_lets_displaced_surfaces_intersect_geometry() {
+    // Floor: UV 0..1 over 2 world units (L = 2), depth 0.5 everywhere, depth_scale 0.1: the
+    // displaced surface lies 0.5 * 0.1 * 2 = 0.1 below the polygon.
+    let floor = material(HeightField::constant(16, 16, 0.5), Technique::Pom, 0.1);
+    let plate = Material { technique: Technique::Flat, base_color: Vec3::new(0.0, 1.0, 0.0), ..Material::default() };
+    let cam = Camera { eye: Vec3::new(0.0, 1.5, 1.5), target: Vec3::ZERO, fov_y_deg: 40.0, ..Camera::default() };
+    let green_pixels = |pdo: bool| {
+        let mut floor = floor.clone();
+        floor.base_color = Vec3::new(1.0, 0.0, 0.0);
+        floor.pixel_depth_offset = pdo;
+        let s = Scene {
+            camera: cam,
+            lights: vec![Light::Directional { direction: Vec3::Y, color: Vec3::ONE, intensity: 1.0 }],
+            materials: vec![floor, plate.clone()],
+            objects: vec![
+                Object {
+                    name: "floor".into(),
+                    mesh: Arc::new(Mesh::plane(Vec2::splat(2.0), 1)),
+                    material: 0,
+                    transform: Mat4::IDENTITY,
+                },
+                Object {
+                    name: "plate".into(),
+                    mesh: Arc::new(Mesh::plane(Vec2::splat(0.5), 1)),
+                    material: 1,
+                    transform: Mat4::from_translation(Vec3::new(0.0, -0.05, 0.0)),
+                },
+            ],
+            ambient: Vec3::ZERO,
+            background: Vec3::ZERO,
+        };
+        let out = render(&s, Mode::Material, 128);
+        out.color.iter().filter(|c| c.y > 0.5 && c.x < 0.1).count()
+    };
+    let (with, without) = (green_pixels(true), green_pixels(false));
+    assert!(without == 0, "without the offset the polygon hides the plate: {without} green pixels");
+    assert!(with > 200, "with the offset the plate shows above the displaced floor: {with} green pixels");
+}
+
+#[test]
+fn supersampling_averages_toward_the_same_picture() {
+    let (s, _) = plane_at(45.0, Technique::Pom);
+    let one = render(&s, Mode::Material, 64);
+    let four = CpuRenderer::new()
+        .render(&s, &RenderOptions { width: 64, height: 64, supersample: 2, ..Default::default() }, &|_, _| {})
+        .unwrap();
+    assert!(four.color.iter().all(|c| c.is_finite()));
+    let d = difference(&image(&one), &image(&four), 48, None);
+    // Same scene, smoother edges: close overall, not identical.
+    assert!(d.psnr_db > 20.0 && d.psnr_db.is_finite(), "{d:?}");
+}
+
+#[test]
+fn point_lights_fall_off_with_the_square_of_distance() {
+    let lit = |height: f32| {
+        let mut m = material(HeightField::constant(4, 4, 0.0), Technique::Normal, 0.05);
+        m.lod_threshold = 99.0;
+        let cam = Camera { eye: Vec3::new(0.0, 3.0, 0.01), target: Vec3::ZERO, fov_y_deg: 20.0, ..Camera::default() };
+        let mut s = scene(Mesh::plane(Vec2::splat(2.0), 1), Mat4::IDENTITY, m, cam, Vec3::Y);
+        s.lights = vec![Light::Point { position: Vec3::new(0.0, height, 0.0), color: Vec3::ONE, intensity: 1.0 }];
+        let out = render(&s, Mode::Material, 32);
+        out.color[(16 * 32 + 16) as usize].x
+    };
+    let (near, far) = (lit(1.0), lit(2.0));
+    // Straight below the light N.L = 1: radiance ratio 4, before the tone curve's shoulder
+    // (x / (1 + x / 4)) which is applied only on output, so compare the linear colours.
+    assert!((near / far - 4.0).abs() < 0.2, "{near} / {far}");
+}
