@@ -443,6 +443,13 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Sample {
         hit_uv = hit.uv;
         hit_depth = hit.depth;
         fetches += hit.fetches;
+        if prep.technique == Technique::Steep {
+            // Steep parallax stops on the first plane *below* the surface, up to one plane
+            // spacing deep. Shadows traced from there start inside the relief and darken in
+            // contour rings; lift the receiver onto the surface (one more fetch).
+            hit_depth = hit_depth.min(surface.depth(hit_uv, lod));
+            fetches += 1;
+        }
     }
     let albedo_lod = albedo_level(&prep.albedo, f.duv_dx, f.duv_dy);
     let lit = |uv: Vec2, depth: f32, with_shadows: bool, fetches: &mut u32| -> (Vec3, f32) {
