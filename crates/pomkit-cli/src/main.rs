@@ -2,6 +2,7 @@
 //! pomkit-io, and reports. The flag names and formats are stable (DESIGN section 5).
 
 mod bake;
+mod bench;
 mod compare;
 mod output;
 mod progress;
@@ -39,6 +40,8 @@ enum Verb {
     Trace(trace::TraceArgs),
     /// The accuracy table: each technique's error against `exact`, and its fetches, per view angle.
     Compare(compare::CompareArgs),
+    /// Time whole frames of the demo scene on the CPU renderer, per technique (see --help).
+    Bench(bench::BenchArgs),
 }
 
 /// Where a height map comes from and how to read it, as a positional `IN` (the `bake` verbs).
@@ -189,6 +192,7 @@ fn main() -> ExitCode {
         Verb::Generate(args) => generate(args),
         Verb::Trace(args) => trace::run(args),
         Verb::Compare(args) => compare::run(args),
+        Verb::Bench(args) => bench::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
