@@ -89,14 +89,7 @@ impl Texture {
     /// Bilinear sample at `uv`.
     #[must_use]
     pub fn sample(&self, uv: Vec2, edges: EdgeMode) -> Vec3 {
-        let t = uv * Vec2::new(self.width as f32, self.height as f32) - 0.5;
-        let t = if t.is_finite() { t } else { Vec2::ZERO };
-        let f = t.floor();
-        let (fx, fy) = (t.x - f.x, t.y - f.y);
-        let (x0, y0) = (f.x as i64, f.y as i64);
-        let top = self.texel(x0, y0, edges).lerp(self.texel(x0 + 1, y0, edges), fx);
-        let bottom = self.texel(x0, y0 + 1, edges).lerp(self.texel(x0 + 1, y0 + 1, edges), fx);
-        top.lerp(bottom, fy)
+        bilinear_vec3(&self.texels, self.width, self.height, uv, edges)
     }
 
     /// The next mip level by a 2x2 box filter (sides halve, never below 1; odd sides fold the
@@ -163,20 +156,25 @@ impl NormalMap {
     /// Bilinear sample at `uv`, renormalized (as a shader does after filtering).
     #[must_use]
     pub fn sample(&self, uv: Vec2, edges: EdgeMode) -> Vec3 {
-        let t = uv * Vec2::new(self.width as f32, self.height as f32) - 0.5;
-        let t = if t.is_finite() { t } else { Vec2::ZERO };
-        let f = t.floor();
-        let (fx, fy) = (t.x - f.x, t.y - f.y);
-        let (x0, y0) = (f.x as i64, f.y as i64);
-        let at = |x: i64, y: i64| {
-            let xi = edges.resolve(x, self.width) as usize;
-            let yi = edges.resolve(y, self.height) as usize;
-            self.normals[yi * self.width as usize + xi]
-        };
-        let top = at(x0, y0).lerp(at(x0 + 1, y0), fx);
-        let bottom = at(x0, y0 + 1).lerp(at(x0 + 1, y0 + 1), fx);
-        top.lerp(bottom, fy).try_normalize().unwrap_or(Vec3::Z)
+        bilinear_vec3(&self.normals, self.width, self.height, uv, edges).try_normalize().unwrap_or(Vec3::Z)
     }
+}
+
+/// Bilinear interpolation of a row-major grid of vectors over texel centres, as a GPU filters.
+fn bilinear_vec3(texels: &[Vec3], width: u32, height: u32, uv: Vec2, edges: EdgeMode) -> Vec3 {
+    let t = uv * Vec2::new(width as f32, height as f32) - 0.5;
+    let t = if t.is_finite() { t } else { Vec2::ZERO };
+    let f = t.floor();
+    let (fx, fy) = (t.x - f.x, t.y - f.y);
+    let (x0, y0) = (f.x as i64, f.y as i64);
+    let at = |x: i64, y: i64| {
+        let xi = edges.resolve(x, width) as usize;
+        let yi = edges.resolve(y, height) as usize;
+        texels[yi * width as usize + xi]
+    };
+    let top = at(x0, y0).lerp(at(x0 + 1, y0), fx);
+    let bottom = at(x0, y0 + 1).lerp(at(x0 + 1, y0 + 1), fx);
+    top.lerp(bottom, fy)
 }
 
 /// A perspective camera.
@@ -355,6 +353,21 @@ mod tests {
         // Up in the world is up on the screen (positive NDC y).
         let c = vp * (cam.target + Vec3::Y * 0.1).extend(1.0);
         assert!(c.y / c.w > 0.0);
+    }
+
+    #[test]
+    fn textures_and_normal_maps_filter_between_texel_centres() {
+        let t = Texture::new(2, 1, vec![Vec3::ZERO, Vec3::ONE]).unwrap();
+        assert!((t.sample(Vec2::new(0.5, 0.5), EdgeMode::Clamp) - Vec3::splat(0.5)).length() < 1e-6);
+        assert_eq!(t.sample(Vec2::new(0.25, 0.5), EdgeMode::Clamp), Vec3::ZERO);
+        // Wrapping: halfway between the last and the first texel.
+        assert!((t.sample(Vec2::new(0.0, 0.5), EdgeMode::Wrap) - Vec3::splat(0.5)).length() < 1e-6);
+        assert_eq!(t.downsample().texels(), &[Vec3::splat(0.5)]);
+        assert!(Texture::new(2, 2, vec![Vec3::ZERO; 3]).is_none());
+        let n = NormalMap::new(2, 1, vec![Vec3::X, Vec3::Y]).unwrap();
+        let m = n.sample(Vec2::new(0.5, 0.5), EdgeMode::Clamp);
+        assert!((m - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-6, "renormalized: {m}");
+        assert_eq!(NormalMap::new(1, 1, vec![Vec3::ZERO]).unwrap().normals(), &[Vec3::Z]);
     }
 
     #[test]
