@@ -10,6 +10,17 @@
 //! It is also the reference the GPU renderer is tested against, and it renders the ground truth:
 //! [`Mode::Displaced`] tessellates every height-mapped mesh to the height map's resolution and
 //! moves its vertices for real.
+//!
+//! ```
+//! use pomkit_cpu::{CpuRenderer, RenderOptions};
+//!
+//! let scene = pomkit_core::demo::demo_scene_sized(64);
+//! let opts = RenderOptions { width: 64, height: 36, ..Default::default() };
+//! let out = CpuRenderer::new().render(&scene, &opts, &|_, _| {})?;
+//! let srgb: Vec<[u8; 3]> = out.to_srgb8(); // out.color is linear RGB
+//! assert_eq!(srgb.len(), 64 * 36);
+//! # Ok::<(), pomkit_cpu::RenderError>(())
+//! ```
 
 pub mod compose;
 pub mod raster;
