@@ -639,6 +639,12 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
     // enter it, and each skipped cell climbs a level, so long empty stretches still cost only
     // O(log size) steps.
     let mut level = 0;
+    // The 2x2 block of sibling cells last gathered at each level (a GPU reads a block with one
+    // `textureGather` and keeps it in registers while the ray walks between the siblings).
+    // (A fixed array: no allocation per ray; a pyramid has at most 33 levels.)
+    let mut blocks: [Option<(i64, i64)>; 34] = [None; 34];
+    // The bilinear patch last gathered: neighbouring texel footprints share patches.
+    let mut last_patch: Option<(i64, i64)> = None;
     // A tiny step in t that moves the probe point well under a texel, used to pick the cell the
     // ray is entering when it sits exactly on a wall.
     let speed = d.x.abs().max(d.y.abs()).max(1.0);
@@ -647,7 +653,12 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
         let probe = o + d * (t + nudge).min(t1);
         let cell = cell_at(pyr, level, probe.x, probe.y, w, h, edges);
         let t_exit = exit_time(&cell, o, d, t, t1);
-        fetches += 1;
+        // One gather per sibling block: stepping between siblings costs no fetch.
+        let key = block_key(&cell, level, edges);
+        if blocks[level.min(33)] != Some(key) {
+            blocks[level.min(33)] = Some(key);
+            fetches += 1;
+        }
         let bound = f64::from(pyr.min_depth(level, cell.ix, cell.iy));
         // The deepest point of the ray inside the cell is at its exit (going down) or entry
         // (going up).
@@ -678,7 +689,7 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
             continue;
         }
         // Level 0: solve against the bilinear patches inside this texel footprint.
-        let (hit, gathers) = leaf_hit(f, edges, o, d, t, t_exit, &cell);
+        let (hit, gathers) = leaf_hit(f, edges, o, d, t, t_exit, &cell, &mut last_patch);
         fetches += gathers;
         if let Some(th) = hit {
             return ExactResult { t: Some(th), fetches };
@@ -691,6 +702,20 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
         t = t_exit;
     }
     ExactResult { t: None, fetches }
+}
+
+/// Identifies the 2x2 sibling block holding `cell`. With wrapping edges: its parent's lower
+/// corner in unbounded texel coordinates, so a ray entering the same texels in another tile
+/// gathers them again. With clamped edges (no tiles): the parent's index.
+fn block_key(cell: &Cell, level: usize, edges: EdgeMode) -> (i64, i64) {
+    match edges {
+        EdgeMode::Wrap => {
+            let size = f64::from(1u32 << level.min(30));
+            let corner = |lo: f64, index: u32| (lo - f64::from(index % 2) * size).round() as i64;
+            (corner(cell.x0, cell.ix), corner(cell.y0, cell.iy))
+        }
+        EdgeMode::Clamp => (i64::from(cell.ix / 2), i64::from(cell.iy / 2)),
+    }
 }
 
 /// Where the ray `o + t d` leaves `cell`, at or after `t` and no later than `t1`.
@@ -760,7 +785,17 @@ fn cell_at(pyr: &MaxHeightPyramid, level: usize, x: f64, y: f64, w: i64, h: i64,
 /// split there into at most three segments, each inside one bilinear patch. A clamped border
 /// cell reaches to infinity outward, but beyond the border texel's centre the clamped surface
 /// is constant along that axis, so the same single split is exact there too.
-fn leaf_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: f64, cell: &Cell) -> (Option<f64>, u32) {
+#[expect(clippy::too_many_arguments, reason = "the ray, its segment, the cell and the gather cache")]
+fn leaf_hit(
+    f: &HeightField,
+    edges: EdgeMode,
+    o: DVec3,
+    d: DVec3,
+    ta: f64,
+    tb: f64,
+    cell: &Cell,
+    last_patch: &mut Option<(i64, i64)>,
+) -> (Option<f64>, u32) {
     let centre = |lo: f64, index: u32| match edges {
         EdgeMode::Wrap => lo + 0.5,
         EdgeMode::Clamp => f64::from(index) + 0.5,
@@ -785,8 +820,12 @@ fn leaf_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: f
         if end <= start && !(end == tb && start == ta) {
             continue;
         }
-        gathers += 1;
-        if let Some(th) = patch_hit(f, edges, o, d, start, end) {
+        let (hit, key) = patch_hit(f, edges, o, d, start, end);
+        if *last_patch != Some(key) {
+            *last_patch = Some(key);
+            gathers += 1;
+        }
+        if let Some(th) = hit {
             return (Some(th), gathers);
         }
         start = end;
@@ -796,12 +835,13 @@ fn leaf_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: f
 
 /// First `t` in `[ta, tb]` where the ray is at or below the one bilinear patch containing the
 /// segment's midpoint.
-fn patch_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: f64) -> Option<f64> {
+fn patch_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: f64) -> (Option<f64>, (i64, i64)) {
     let mid = o + d * (0.5 * (ta + tb));
     // Patch between texel centres (i, j) and (i + 1, j + 1), centres at k + 0.5.
     let i = (mid.x - 0.5).floor();
     let j = (mid.y - 0.5).floor();
     let (ii, jj) = (i as i64, j as i64);
+    let key = (ii, jj);
     let s00 = f64::from(f.depth_at(ii, jj, edges));
     let s10 = f64::from(f.depth_at(ii + 1, jj, edges));
     let s01 = f64::from(f.depth_at(ii, jj + 1, edges));
@@ -815,7 +855,7 @@ fn patch_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: 
     let qc = o.z - (a + b * fx0 + c * fy0 + e * fx0 * fy0);
     let g = |t: f64| (qa * t + qb) * t + qc;
     if g(ta) >= 0.0 {
-        return Some(ta);
+        return (Some(ta), key);
     }
     // Roots of g in (ta, tb], smallest first.
     let mut best: Option<f64> = None;
@@ -844,9 +884,9 @@ fn patch_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: 
         }
     }
     if let Some(r) = best {
-        return Some(r);
+        return (Some(r), key);
     }
     // No sign change found by the roots (a tangent touch lost to rounding): accept the end if
     // it is at or below the surface.
-    if g(tb) >= 0.0 { Some(tb) } else { None }
+    (if g(tb) >= 0.0 { Some(tb) } else { None }, key)
 }
