@@ -43,6 +43,10 @@ pub struct RenderArgs {
     /// technique's PSNR and share of differing pixels against it.
     #[arg(long, value_delimiter = ',')]
     compare: Vec<String>,
+    /// Debug view of the LOD system: green where the full technique runs, red where only
+    /// normal mapping does (beyond each material's lod_threshold), blended across the fade.
+    #[arg(long)]
+    lod_tint: bool,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,6 +99,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         supersample: a.supersample,
         mode,
         aovs: !a.aov.is_empty(),
+        lod_tint: a.lod_tint,
         ..Default::default()
     };
     if modes.is_empty() {

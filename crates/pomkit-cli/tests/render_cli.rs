@@ -209,3 +209,20 @@ fn example_scenes_render() {
     }
     assert!(n > 0, "no example scenes found");
 }
+
+#[test]
+fn lod_tint_changes_the_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    for args in [
+        ["render", "--size", "80x45", "-o", "plain.png", ""],
+        ["render", "--size", "80x45", "-o", "tint.png", "--lod-tint"],
+    ] {
+        let args: Vec<&str> = args.into_iter().filter(|a| !a.is_empty()).collect();
+        let out = pomkit(&args, dir.path());
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let a = image::open(dir.path().join("plain.png")).unwrap().to_rgb8();
+    let b = image::open(dir.path().join("tint.png")).unwrap().to_rgb8();
+    let changed = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+    assert!(changed > (80 * 45) / 4, "the tint should recolour the textured surfaces: {changed}");
+}

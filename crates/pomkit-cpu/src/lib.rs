@@ -67,11 +67,22 @@ pub struct RenderOptions {
     /// `displaced` mode: largest triangle edge in texels of the height map (1 = the height
     /// map's resolution, as the ground truth asks).
     pub displaced_edge_texels: f32,
+    /// Debug view of the LOD system (Tatarchuk 2006 figure 12): tint pixels green where the
+    /// full technique runs, red where only normal mapping does, blended across the fade.
+    pub lod_tint: bool,
 }
 
 impl Default for RenderOptions {
     fn default() -> Self {
-        Self { width: 1280, height: 720, supersample: 1, mode: Mode::Material, aovs: false, displaced_edge_texels: 1.0 }
+        Self {
+            width: 1280,
+            height: 720,
+            supersample: 1,
+            mode: Mode::Material,
+            aovs: false,
+            displaced_edge_texels: 1.0,
+            lod_tint: false,
+        }
     }
 }
 
@@ -229,7 +240,7 @@ impl CpuRenderer {
         let (sw, sh) = (w * ss, h * ss);
         let prepared = prepare(scene, opts)?;
         let triangles = self.triangles(scene, &prepared, opts, sw, sh);
-        let samples = shade_tiles(scene, &prepared, &triangles, sw, sh, progress);
+        let samples = shade_tiles(scene, &prepared, &triangles, sw, sh, opts.lod_tint, progress);
         Ok(resolve(&samples, w, h, ss, scene.background, opts.aovs))
     }
 
@@ -261,14 +272,17 @@ impl CpuRenderer {
                     let p = world.positions[i];
                     let uv = world.uvs[i];
                     let depth = match (&prep.surface, displaced) {
-                        (Some(s), true) => s.field().sample_bilinear(uv, p_edges(prep)),
+                        (Some(s), true) => s.field().sample_bilinear(uv, prep.params.edges),
                         _ => 0.0,
                     };
                     ClipVertex {
                         clip: vp * p.extend(1.0),
                         v: Varyings {
                             world: p,
-                            normal: obj_normal(&world, i),
+                            // For displaced geometry these are the undisplaced surface's
+                            // normals (`Mesh::displaced_for_shading`): the normal map adds the
+                            // bumps, as for every parallax technique.
+                            normal: world.normals[i],
                             tangent: world.tangents[i],
                             uv,
                             uv_scale: world.uv_scale[i],
@@ -288,18 +302,6 @@ impl CpuRenderer {
         }
         out
     }
-}
-
-/// The edge mode a prepared material samples with.
-fn p_edges(p: &Prepared) -> EdgeMode {
-    p.params.edges
-}
-
-/// The shading normal of vertex `i`: for displaced geometry the *undisplaced* surface's normal
-/// (the normal map adds the bumps, exactly as for the parallax techniques, so the two pictures
-/// differ only where they sample), which `Mesh::displaced` keeps in `normals`.
-fn obj_normal(world: &Mesh, i: usize) -> Vec3 {
-    world.normals[i]
 }
 
 /// Prepares every material: surfaces for tracing, normal maps (baked when absent), albedo mips.
@@ -358,6 +360,7 @@ fn shade_tiles(
     tris: &[ScreenTriangle],
     w: u32,
     h: u32,
+    lod_tint: bool,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<Option<Sample>> {
     let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
@@ -396,7 +399,12 @@ fn shade_tiles(
                     if slot.is_some_and(|s| s.z <= f.z) {
                         return;
                     }
-                    let s = shade(scene, prep, f);
+                    let mut s = shade(scene, prep, f);
+                    if lod_tint && prep.surface.is_some() {
+                        let w = lod_weight(s.lod, prep.material.lod_threshold);
+                        let tint = Vec3::new(1.0, 0.25, 0.2).lerp(Vec3::new(0.25, 1.0, 0.3), w);
+                        s.color = s.color * 0.5 + tint * 0.5 * s.color.length().max(0.05);
+                    }
                     if slot.is_none_or(|old| s.z < old.z) {
                         *slot = Some(s);
                     }

@@ -344,3 +344,29 @@ fn point_lights_fall_off_with_the_square_of_distance() {
     // (x / (1 + x / 4)) which is applied only on output, so compare the linear colours.
     assert!((near / far - 4.0).abs() < 0.2, "{near} / {far}");
 }
+
+#[test]
+fn lod_tint_marks_near_pixels_green_and_far_pixels_red() {
+    let (mut s, _) = plane_at(75.0, Technique::Pom);
+    // A low threshold so the far part of the plane is past it at this size.
+    s.materials[0].lod_threshold = 1.5;
+    let opts = RenderOptions { width: 96, height: 96, lod_tint: true, aovs: true, ..Default::default() };
+    let out = CpuRenderer::new().render(&s, &opts, &|_, _| {}).unwrap();
+    let aovs = out.aovs.as_ref().unwrap();
+    let (mut near, mut far) = ((0.0f32, 0usize), (0.0f32, 0usize));
+    for (i, c) in out.color.iter().enumerate() {
+        if aovs.uv[i] == Vec2::ZERO {
+            continue;
+        }
+        // Green minus red, normalized by brightness.
+        let g = (c.y - c.x) / (c.length() + 1e-4);
+        if aovs.lod[i] < 0.5 {
+            near = (near.0 + g, near.1 + 1);
+        } else if aovs.lod[i] > 1.5 {
+            far = (far.0 + g, far.1 + 1);
+        }
+    }
+    assert!(near.1 > 50 && far.1 > 50, "both regions present: {near:?} {far:?}");
+    let (near, far) = (near.0 / near.1 as f32, far.0 / far.1 as f32);
+    assert!(near > 0.1 && far < -0.1, "near green {near}, far red {far}");
+}
