@@ -344,7 +344,11 @@ impl Mesh {
             let w = if mirror { -handedness(t0.w) } else { handedness(t0.w) };
             let t = unit_f64(t_new)
                 .map(|t| t.as_vec3())
-                .and_then(|t| (t - n * n.dot(t)).try_normalize())
+                // A tangent (nearly) parallel to the new normal (a singular transform) leaves
+                // only rounding noise after the projection: use the fallback, not the noise.
+                .map(|t| t - n * n.dot(t))
+                .filter(|r| r.length_squared() > 1e-8)
+                .and_then(Vec3::try_normalize)
                 .map_or_else(|| n.any_orthonormal_vector().extend(1.0), |t| t.extend(w));
             tangents.push(t);
             let s = s0.as_dvec2() * DVec2::new(t_new.length(), b_new.length());
