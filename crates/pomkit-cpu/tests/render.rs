@@ -142,60 +142,41 @@ fn bump_test_on_a_sphere() {
     bump_test(Mesh::uv_sphere(1.0, 48, 96), Vec2::new(0.5, 0.5), "sphere");
 }
 
-#[test]
-fn uvs_mirrored_in_v_use_the_handedness_for_the_bitangent() {
-    // v mirrored: T stays +X but w = -1 and B = w cross(N, T) = -Y. Lit from world +Y, the bump
-    // must be brighter on its world +Y side; a renderer that ignored w would flip it.
+/// A quad with its UVs mirrored along one axis, lit from world `+axis`: the bump must be
+/// brighter on its world `+axis` side.
+fn mirrored_bump_test(mirror_u: bool, axis: Vec3) {
     let mut mesh = Mesh::quad(Vec2::splat(2.0));
     for uv in &mut mesh.uvs {
-        uv.y = 1.0 - uv.y;
+        if mirror_u {
+            uv.x = 1.0 - uv.x;
+        } else {
+            uv.y = 1.0 - uv.y;
+        }
     }
-    let mesh = Mesh::new(
-        mesh.positions.clone(),
-        Some(mesh.normals.clone()),
-        mesh.uvs.clone(),
-        mesh.indices.clone(),
-        Default::default(),
-    )
-    .unwrap();
-    assert!(mesh.tangents.iter().all(|t| t.w < 0.0 && t.x > 0.9), "v-mirrored quad: T = +X, w = -1");
+    let mesh = Mesh::new(mesh.positions, Some(mesh.normals), mesh.uvs, mesh.indices, Default::default()).unwrap();
+    assert!(mesh.tangents.iter().all(|t| t.w < 0.0), "a mirrored quad has w = -1");
     let cam = Camera { eye: Vec3::new(0.0, 0.0, 2.0), target: Vec3::ZERO, fov_y_deg: 30.0, ..Camera::default() };
     for technique in [Technique::Normal, Technique::Pom] {
-        let s =
-            scene(mesh.clone(), Mat4::IDENTITY, material(bump_field(), technique, 0.05), cam, Vec3::new(0.0, 1.0, 0.4));
+        let m = material(bump_field(), technique, 0.05);
+        let s = scene(mesh.clone(), Mat4::IDENTITY, m, cam, axis + Vec3::Z * 0.4);
         let out = render(&s, Mode::Material, W);
-        let plus = brightness_at(&out, &cam, Vec3::new(0.0, 0.1, 0.0));
-        let minus = brightness_at(&out, &cam, Vec3::new(0.0, -0.1, 0.0));
-        assert!(plus > minus + 0.1, "{technique}: {plus} vs {minus}");
+        let plus = brightness_at(&out, &cam, axis * 0.1);
+        let minus = brightness_at(&out, &cam, -axis * 0.1);
+        assert!(plus > minus + 0.1, "mirror_u {mirror_u}, {technique}: {plus} vs {minus}");
     }
 }
 
 #[test]
 fn mirrored_uvs_light_the_world_side_facing_the_light() {
-    // The quad with u mirrored: its tangent points along -X and w = -1. Lit from world +X, the
-    // bump must still be brighter on its world +X side.
-    let mut mesh = Mesh::quad(Vec2::splat(2.0));
-    for uv in &mut mesh.uvs {
-        uv.x = 1.0 - uv.x;
-    }
-    let mesh = Mesh::new(
-        mesh.positions.clone(),
-        Some(mesh.normals.clone()),
-        mesh.uvs.clone(),
-        mesh.indices.clone(),
-        Default::default(),
-    )
-    .unwrap();
-    assert!(mesh.tangents.iter().all(|t| t.w < 0.0), "mirrored quad has w = -1");
-    let cam = Camera { eye: Vec3::new(0.0, 0.0, 2.0), target: Vec3::ZERO, fov_y_deg: 30.0, ..Camera::default() };
-    for technique in [Technique::Normal, Technique::Pom] {
-        let s =
-            scene(mesh.clone(), Mat4::IDENTITY, material(bump_field(), technique, 0.05), cam, Vec3::new(1.0, 0.0, 0.4));
-        let out = render(&s, Mode::Material, W);
-        let plus = brightness_at(&out, &cam, Vec3::new(0.1, 0.0, 0.0));
-        let minus = brightness_at(&out, &cam, Vec3::new(-0.1, 0.0, 0.0));
-        assert!(plus > minus + 0.1, "{technique}: {plus} vs {minus}");
-    }
+    // u mirrored: the tangent points along -X and w = -1; lit from world +X.
+    mirrored_bump_test(true, Vec3::X);
+}
+
+#[test]
+fn uvs_mirrored_in_v_use_the_handedness_for_the_bitangent() {
+    // v mirrored: T stays +X but w = -1 and B = w cross(N, T) = -Y. Lit from world +Y, the bump
+    // must be brighter on its world +Y side; a renderer that ignored w would flip it.
+    mirrored_bump_test(false, Vec3::Y);
 }
 
 /// A plane of cobblestones seen at `angle` degrees from its normal, rendered in each mode.
