@@ -154,21 +154,24 @@ fn write_md(w: &mut dyn Write, caption: &str, rows: &[AccuracyRow]) -> std::io::
     Ok(())
 }
 
+/// The machine-readable fields of a row, in `CSV_HEADER` order (the JSON keys are the same).
+fn fields(r: &AccuracyRow) -> [String; 8] {
+    [
+        r.technique.to_string(),
+        r.angle_deg.to_string(),
+        r.rays.to_string(),
+        num(r.mean_error),
+        num(r.p95_error),
+        num(r.share_over_1),
+        num(r.mean_fetches),
+        r.max_fetches.to_string(),
+    ]
+}
+
 fn write_csv(w: &mut dyn Write, rows: &[AccuracyRow]) -> std::io::Result<()> {
     writeln!(w, "{CSV_HEADER}")?;
     for r in rows {
-        writeln!(
-            w,
-            "{},{},{},{},{},{},{},{}",
-            r.technique,
-            r.angle_deg,
-            r.rays,
-            num(r.mean_error),
-            num(r.p95_error),
-            num(r.share_over_1),
-            num(r.mean_fetches),
-            r.max_fetches
-        )?;
+        writeln!(w, "{}", fields(r).join(","))?;
     }
     Ok(())
 }
@@ -182,20 +185,19 @@ fn num(x: f64) -> String {
 fn write_json(w: &mut dyn Write, rows: &[AccuracyRow]) -> std::io::Result<()> {
     writeln!(w, "[")?;
     for (i, r) in rows.iter().enumerate() {
-        // Technique names are plain ASCII words with hyphens: no escaping needed.
-        write!(
-            w,
-            "  {{\"technique\": \"{}\", \"angle\": {}, \"rays\": {}, \"mean_error\": {}, \"p95_error\": {}, \
-             \"share_over_1\": {}, \"mean_fetches\": {}, \"max_fetches\": {}}}",
-            r.technique,
-            r.angle_deg,
-            r.rays,
-            num(r.mean_error),
-            num(r.p95_error),
-            num(r.share_over_1),
-            num(r.mean_fetches),
-            r.max_fetches
-        )?;
+        // Technique names are plain ASCII words with hyphens: no escaping needed; every other
+        // field is a number.
+        let pairs: Vec<String> = CSV_HEADER
+            .split(',')
+            .zip(fields(r))
+            .enumerate()
+            .map(
+                |(k, (key, value))| {
+                    if k == 0 { format!("\"{key}\": \"{value}\"") } else { format!("\"{key}\": {value}") }
+                },
+            )
+            .collect();
+        write!(w, "  {{{}}}", pairs.join(", "))?;
         writeln!(w, "{}", if i + 1 < rows.len() { "," } else { "" })?;
     }
     writeln!(w, "]")?;
