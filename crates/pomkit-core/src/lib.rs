@@ -38,6 +38,7 @@ pub mod heightfield;
 pub mod mesh;
 pub mod procedural;
 pub mod pyramid;
+pub mod render;
 pub mod scene;
 pub mod shadow;
 pub mod tangent;

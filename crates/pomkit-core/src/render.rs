@@ -1,0 +1,203 @@
+//! What every renderer shares: render options, outputs, AOVs, the sample resolve and the tone
+//! curve. `pomkit-cpu` and `pomkit-gpu` take the same [`RenderOptions`] and return the same
+//! [`RenderOutput`], so their pictures can be compared pixel for pixel.
+
+use glam::{Vec2, Vec3};
+
+use crate::trace::Technique;
+
+/// Which geometry and technique the renderer uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Each material's own technique (or the override).
+    Material,
+    /// Every material with this technique.
+    Technique(Technique),
+    /// The ground truth: height-mapped meshes tessellated and displaced for real, shaded with
+    /// normal mapping at the true surface point and the material's shadows.
+    Displaced,
+}
+
+/// Render settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderOptions {
+    /// Output width in pixels.
+    pub width: u32,
+    /// Output height in pixels.
+    pub height: u32,
+    /// Supersampling factor per axis (1 = off): renders k x k samples per pixel and averages.
+    pub supersample: u32,
+    /// Technique selection.
+    pub mode: Mode,
+    /// Also produce the AOVs (hit UV, depth, shadow, fetches, LOD).
+    pub aovs: bool,
+    /// `displaced` mode: largest triangle edge in texels of the height map (1 = the height
+    /// map's resolution, as the ground truth asks).
+    pub displaced_edge_texels: f32,
+    /// Debug view of the LOD system (Tatarchuk 2006 figure 12): tint pixels green where the
+    /// full technique runs, red where only normal mapping does, blended across the fade.
+    pub lod_tint: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            width: 1280,
+            height: 720,
+            supersample: 1,
+            mode: Mode::Material,
+            aovs: false,
+            displaced_edge_texels: 1.0,
+            lod_tint: false,
+        }
+    }
+}
+
+/// Per-pixel outputs besides colour (each `width * height`, row-major).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Aovs {
+    /// Displaced texture coordinate (0 where no surface).
+    pub uv: Vec<Vec2>,
+    /// Hit depth in `[0, 1]` below the polygon.
+    pub depth: Vec<f32>,
+    /// Light visibility of the first light (1 lit).
+    pub shadow: Vec<f32>,
+    /// Height fetches (trace + shadows).
+    pub fetches: Vec<f32>,
+    /// Mip level of the height map.
+    pub lod: Vec<f32>,
+}
+
+/// What [`CpuRenderer::render`] returns.
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear RGB, row-major.
+    pub color: Vec<Vec3>,
+    /// AOVs when asked for.
+    pub aovs: Option<Aovs>,
+    /// Pixels covered by geometry.
+    pub covered: usize,
+}
+
+impl RenderOutput {
+    /// sRGB8 pixels (`[r, g, b]` per pixel), with a gentle filmic tone curve applied first.
+    #[must_use]
+    pub fn to_srgb8(&self) -> Vec<[u8; 3]> {
+        self.color
+            .iter()
+            .map(|c| {
+                let t = tone(*c);
+                [t.x, t.y, t.z].map(|v| (crate::scene::linear_to_srgb(v) * 255.0 + 0.5) as u8)
+            })
+            .collect()
+    }
+}
+
+/// The tone curve both renderers apply before sRGB encoding. A soft shoulder so bright highlights do not clip hard: `x / (1 + x / 4)` per channel after
+/// an exposure of 1 (identity for dark values).
+#[must_use]
+pub fn tone(c: Vec3) -> Vec3 {
+    let c = if c.is_finite() { c.max(Vec3::ZERO) } else { Vec3::ZERO };
+    c / (Vec3::ONE + c / 4.0)
+}
+
+/// Why a render could not run.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum RenderError {
+    /// Width or height is 0 or too large.
+    #[error("image size {width}x{height} is not allowed: each side must be 1 to 16384 pixels")]
+    Size {
+        /// Requested width.
+        width: u32,
+        /// Requested height.
+        height: u32,
+    },
+    /// An object names a material that does not exist.
+    #[error("object \"{object}\" uses material {index}, but the scene has {count} materials")]
+    Material {
+        /// The object.
+        object: String,
+        /// Its material index.
+        index: usize,
+        /// Materials in the scene.
+        count: usize,
+    },
+    /// A material's trace parameters are invalid.
+    #[error("material \"{material}\": {reason}")]
+    Params {
+        /// The material.
+        material: String,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// A shaded sample: colour, depth and AOV values.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Sample {
+    /// Linear colour.
+    pub color: Vec3,
+    /// Depth-buffer value (smaller is nearer).
+    pub z: f32,
+    /// Displaced UV.
+    pub uv: Vec2,
+    /// Hit depth below the polygon.
+    pub depth: f32,
+    /// Visibility of the first light.
+    pub shadow: f32,
+    /// Height fetches.
+    pub fetches: f32,
+    /// Mip level of the height map.
+    pub lod: f32,
+}
+
+/// Averages `ss x ss` supersamples per pixel (samples are `(w ss) x (h ss)`, row-major), fills
+/// uncovered samples with `background`, and collects the AOVs when `aovs`.
+#[must_use]
+pub fn resolve(samples: &[Option<Sample>], w: u32, h: u32, ss: u32, background: Vec3, aovs: bool) -> RenderOutput {
+    let sw = w * ss;
+    let n = (ss * ss) as f32;
+    let mut color = vec![Vec3::ZERO; (w * h) as usize];
+    let mut a = Aovs::default();
+    if aovs {
+        a.uv = vec![Vec2::ZERO; (w * h) as usize];
+        a.depth = vec![0.0; (w * h) as usize];
+        a.shadow = vec![0.0; (w * h) as usize];
+        a.fetches = vec![0.0; (w * h) as usize];
+        a.lod = vec![0.0; (w * h) as usize];
+    }
+    let mut covered = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let mut acc = Vec3::ZERO;
+            let mut any = false;
+            for sy in 0..ss {
+                for sx in 0..ss {
+                    let s = samples[((y * ss + sy) * sw + x * ss + sx) as usize];
+                    match s {
+                        Some(s) => {
+                            any = true;
+                            acc += if s.color.is_finite() { s.color } else { Vec3::ZERO };
+                            if aovs {
+                                a.uv[i] += s.uv / n;
+                                a.depth[i] += s.depth / n;
+                                a.shadow[i] += s.shadow / n;
+                                a.fetches[i] += s.fetches / n;
+                                a.lod[i] += s.lod / n;
+                            }
+                        }
+                        None => acc += background,
+                    }
+                }
+            }
+            covered += usize::from(any);
+            color[i] = acc / n;
+        }
+    }
+    RenderOutput { width: w, height: h, color, aovs: aovs.then_some(a), covered }
+}

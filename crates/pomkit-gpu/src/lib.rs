@@ -1,0 +1,46 @@
+//! pomkit-gpu: the wgpu/WGSL renderer.
+//!
+//! The same system as `pomkit-cpu`, on the GPU: every technique of DESIGN section 3 as a
+//! pipeline variant (a WGSL `override` constant), hard, soft and exact self-shadows, the LOD
+//! fade and its tint view, Blinn-Phong shading and pixel depth offset; compute passes that
+//! rebuild a height map's mips, normals, parallax map and maximum-height pyramid on the GPU, so
+//! a height field may change every frame.
+
+pub mod context;
+pub mod height;
+pub mod material;
+pub mod renderer;
+pub mod util;
+
+pub use context::GpuContext;
+pub use material::{FrameUniforms, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
+pub use renderer::{GpuRenderError, GpuRenderer, GpuScene, Timings};
+
+/// Why the GPU renderer could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter: the machine has no Vulkan, Metal, DX12 or GL driver (on Linux without a GPU,
+    /// `apt-get install mesa-vulkan-drivers` gives the software adapter lavapipe).
+    #[error(
+        "no GPU adapter found (on Linux without a GPU, install Mesa's software Vulkan driver: apt-get install mesa-vulkan-drivers)"
+    )]
+    NoAdapter,
+    /// The adapter refused to open a device, or the device was lost.
+    #[error("GPU device error: {0}")]
+    Device(String),
+    /// Something the adapter or this renderer does not support (the message says what).
+    #[error("not supported: {0}")]
+    Unsupported(String),
+    /// A texture is larger than the device allows.
+    #[error("{what} is {width}x{height}, larger than this GPU's limit of {limit} texels per side")]
+    TooLarge {
+        /// Which texture.
+        what: String,
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+        /// The device's `max_texture_dimension_2d`.
+        limit: u32,
+    },
+}

@@ -1,0 +1,623 @@
+//! A pomkit material on the GPU, and the pipelines that draw it.
+//!
+//! This is the part a wgpu program uses in its own render pass: [`MaterialPipelines`] owns the
+//! shader (`render.wgsl`) and one pipeline per technique and target layout; a [`GpuMaterial`]
+//! holds a material's textures, uniforms and bind group; a [`GpuMesh`] its vertex buffers; and
+//! [`FrameUniforms`] the camera and lights. `examples/wgpu_material.rs` shows the whole flow.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use glam::{Mat3, Mat4, Vec3};
+use pomkit_core::bake::NormalFilter;
+use pomkit_core::mesh::Mesh;
+use pomkit_core::scene::{Camera, Light, Material, NormalMap, Texture};
+use pomkit_core::shadow::ShadowMode;
+use pomkit_core::trace::Technique;
+use pomkit_core::{EdgeMode, HeightField};
+use wgpu::util::DeviceExt;
+
+use crate::height::{HeightMaps, HeightPassOptions, HeightPasses};
+use crate::util::{Std140, rgba16f_bytes};
+use crate::{GpuContext, GpuError};
+
+/// Lights the shader reads per frame.
+pub const MAX_LIGHTS: usize = 4;
+
+/// The value of the shader's `TECHNIQUE` override constant.
+#[must_use]
+pub fn technique_index(t: Technique) -> u32 {
+    match t {
+        Technique::Flat => 0,
+        Technique::Normal => 1,
+        Technique::Parallax => 2,
+        Technique::Iterative => 3,
+        Technique::Steep => 4,
+        Technique::PomClassic => 5,
+        Technique::Pom => 6,
+        Technique::Relief => 7,
+        Technique::Exact => 8,
+    }
+}
+
+fn shadow_index(m: ShadowMode) -> u32 {
+    match m {
+        ShadowMode::None => 0,
+        ShadowMode::Hard => 1,
+        ShadowMode::Soft => 2,
+        ShadowMode::Exact => 3,
+    }
+}
+
+/// The render targets a pipeline draws into.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Targets {
+    /// Colour target format (linear colour is written; use an `*Srgb` format for display).
+    pub color: wgpu::TextureFormat,
+    /// Also write the two AOV targets ([`AOV_FORMATS`]): (hit u, hit v, hit depth, visibility)
+    /// and (fetches, height mip level, coverage, 0).
+    pub aovs: bool,
+    /// Depth format (depth test `Less`, cleared to 1).
+    pub depth: wgpu::TextureFormat,
+}
+
+/// Formats of the two AOV targets: hit UV and depth need f32; fetches, mip level and coverage fit
+/// f16 (fetch counts are exact up to 2048). With an `Rgba16Float` colour target the three stay
+/// within WebGPU's default 32 bytes of colour attachments per sample.
+pub const AOV_FORMATS: [wgpu::TextureFormat; 2] = [wgpu::TextureFormat::Rgba32Float, wgpu::TextureFormat::Rgba16Float];
+
+/// Vertex layout: position, normal, tangent (xyz, w handedness), uv, uv scale, depth.
+const VERTEX_FLOATS: usize = 15;
+
+/// The shader and its pipelines, created once per device.
+pub struct MaterialPipelines {
+    shader: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
+    /// Bind group layout of group 0 (frame).
+    pub frame_layout: wgpu::BindGroupLayout,
+    /// Bind group layout of group 1 (material).
+    pub material_layout: wgpu::BindGroupLayout,
+    /// Bind group layout of group 2 (object).
+    pub object_layout: wgpu::BindGroupLayout,
+    pipelines: HashMap<(u32, bool, Targets), wgpu::RenderPipeline>,
+    passes: HeightPasses,
+    dummy: Arc<DummyTextures>,
+}
+
+struct DummyTextures {
+    heights: wgpu::TextureView,
+    normals: wgpu::TextureView,
+    pyramid: wgpu::TextureView,
+}
+
+fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+fn texture_with_mips(
+    ctx: &GpuContext,
+    label: &str,
+    format: wgpu::TextureFormat,
+    levels: &[(u32, u32, Vec<u8>)],
+) -> wgpu::Texture {
+    let (w, h, _) = &levels[0];
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d { width: *w, height: *h, depth_or_array_layers: 1 },
+        mip_level_count: levels.len() as u32,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let bpp = format.block_copy_size(None).unwrap_or(8);
+    for (level, (lw, lh, bytes)) in levels.iter().enumerate() {
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: level as u32,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytes,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(lw * bpp), rows_per_image: Some(*lh) },
+            wgpu::Extent3d { width: *lw, height: *lh, depth_or_array_layers: 1 },
+        );
+    }
+    texture
+}
+
+fn rgba_levels(chain: &[Texture]) -> Vec<(u32, u32, Vec<u8>)> {
+    chain
+        .iter()
+        .map(|t| {
+            let values: Vec<f32> = t.texels().iter().flat_map(|c| [c.x, c.y, c.z, 1.0]).collect();
+            (t.width(), t.height(), rgba16f_bytes(&values))
+        })
+        .collect()
+}
+
+impl MaterialPipelines {
+    /// Compiles the shader and the compute passes for `ctx`'s device.
+    #[must_use]
+    pub fn new(ctx: &GpuContext) -> Self {
+        let device = &ctx.device;
+        let shader = device.create_shader_module(wgpu::include_wgsl!("render.wgsl"));
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("pomkit frame"),
+            entries: &[uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT)],
+        });
+        let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("pomkit material"),
+            entries: &[
+                uniform_entry(0, wgpu::ShaderStages::FRAGMENT),
+                texture_entry(1, true),
+                texture_entry(2, true),
+                texture_entry(3, false),
+                texture_entry(4, true),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 5,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let object_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("pomkit object"),
+            entries: &[uniform_entry(0, wgpu::ShaderStages::VERTEX)],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("pomkit material"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&material_layout), Some(&object_layout)],
+            immediate_size: 0,
+        });
+        let one = |label: &str, format: wgpu::TextureFormat, bytes: Vec<u8>| {
+            texture_with_mips(ctx, label, format, &[(1, 1, bytes)]).create_view(&Default::default())
+        };
+        let dummy = DummyTextures {
+            heights: one("pomkit no height", wgpu::TextureFormat::Rgba16Float, rgba16f_bytes(&[0.0; 4])),
+            normals: one("pomkit no normals", wgpu::TextureFormat::Rgba16Float, rgba16f_bytes(&[0.0, 0.0, 1.0, 0.0])),
+            pyramid: one("pomkit no pyramid", wgpu::TextureFormat::R32Float, 0f32.to_le_bytes().to_vec()),
+        };
+        Self {
+            shader,
+            layout,
+            frame_layout,
+            material_layout,
+            object_layout,
+            pipelines: HashMap::new(),
+            passes: HeightPasses::new(device),
+            dummy: Arc::new(dummy),
+        }
+    }
+
+    /// The compute passes that rebuild height maps.
+    #[must_use]
+    pub fn height_passes(&self) -> &HeightPasses {
+        &self.passes
+    }
+
+    /// The pipeline for `technique` if [`MaterialPipelines::pipeline`] created it already.
+    #[must_use]
+    pub fn cached(&self, technique: Technique, depth_offset: bool, targets: Targets) -> Option<&wgpu::RenderPipeline> {
+        self.pipelines.get(&(technique_index(technique), depth_offset, targets))
+    }
+
+    /// The pipeline drawing `technique` into `targets` (created on first use). Materials with
+    /// pixel depth offset use the `frag_depth` variant.
+    pub fn pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        technique: Technique,
+        depth_offset: bool,
+        targets: Targets,
+    ) -> &wgpu::RenderPipeline {
+        let key = (technique_index(technique), depth_offset, targets);
+        let (shader, layout) = (&self.shader, &self.layout);
+        self.pipelines.entry(key).or_insert_with(|| {
+            let constants = [("TECHNIQUE", f64::from(key.0))];
+            let target = |format| wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL };
+            let color_targets = [
+                Some(target(targets.color)),
+                targets.aovs.then(|| target(AOV_FORMATS[0])),
+                targets.aovs.then(|| target(AOV_FORMATS[1])),
+            ];
+            let attributes = wgpu::vertex_attr_array![
+                0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x2, 4 => Float32x2, 5 => Float32
+            ];
+            let label = format!("pomkit {}{}", technique.name(), if depth_offset { " +pdo" } else { "" });
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(&label),
+                layout: Some(layout),
+                vertex: wgpu::VertexState {
+                    module: shader,
+                    entry_point: Some("vs_main"),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &constants,
+                        ..Default::default()
+                    },
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: (VERTEX_FLOATS * 4) as u64,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &attributes,
+                    })],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    front_face: wgpu::FrontFace::Ccw,
+                    cull_mode: Some(wgpu::Face::Back),
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: targets.depth,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: shader,
+                    entry_point: Some(if depth_offset { "fs_main_depth" } else { "fs_main" }),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &constants,
+                        ..Default::default()
+                    },
+                    targets: &color_targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        })
+    }
+}
+
+/// Camera and lights for one frame (bind group 0).
+pub struct FrameUniforms {
+    buffer: wgpu::Buffer,
+    /// The bind group to set at index 0.
+    pub bind_group: wgpu::BindGroup,
+}
+
+impl FrameUniforms {
+    /// A frame uniform block.
+    #[must_use]
+    pub fn new(ctx: &GpuContext, pipelines: &MaterialPipelines) -> Self {
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pomkit frame"),
+            size: Self::bytes_len(),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("pomkit frame"),
+            layout: &pipelines.frame_layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() }],
+        });
+        Self { buffer, bind_group }
+    }
+
+    fn bytes_len() -> u64 {
+        // 2 mat4 + eye + ambient + 4 lights x 2 vec4 + 2 u32 (padded to 16).
+        (64 * 2 + 16 * 2 + 32 * MAX_LIGHTS as u64) + 16
+    }
+
+    /// Writes the camera (for a target of `aspect` = width / height), lights, ambient light and
+    /// the LOD tint switch.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] for more than [`MAX_LIGHTS`] lights.
+    pub fn write(
+        &self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        aspect: f32,
+        lights: &[Light],
+        ambient: Vec3,
+        lod_tint: bool,
+    ) -> Result<(), GpuError> {
+        if lights.len() > MAX_LIGHTS {
+            return Err(GpuError::Unsupported(format!(
+                "{} lights: the GPU renderer shades at most {MAX_LIGHTS} per frame",
+                lights.len()
+            )));
+        }
+        let mut u = Std140::new();
+        u.mat4(camera.projection(aspect) * camera.view());
+        u.mat4(camera.projection(1.0) * camera.view());
+        u.vec4(camera.eye.extend(1.0).to_array());
+        u.vec4(ambient.extend(0.0).to_array());
+        for i in 0..MAX_LIGHTS {
+            match lights.get(i) {
+                Some(Light::Directional { direction, color, intensity }) => {
+                    u.vec4(direction.try_normalize().unwrap_or(Vec3::Y).extend(0.0).to_array());
+                    u.vec4((*color * *intensity).extend(0.0).to_array());
+                }
+                Some(Light::Point { position, color, intensity }) => {
+                    u.vec4(position.extend(1.0).to_array());
+                    u.vec4((*color * *intensity).extend(0.0).to_array());
+                }
+                None => {
+                    u.vec4([0.0; 4]);
+                    u.vec4([0.0; 4]);
+                }
+            }
+        }
+        u.u(lights.len() as u32).u(u32::from(lod_tint));
+        ctx.queue.write_buffer(&self.buffer, 0, &u.bytes());
+        Ok(())
+    }
+}
+
+/// A material's textures, uniforms and bind group (bind group 1).
+pub struct GpuMaterial {
+    /// The technique this material draws with.
+    pub technique: Technique,
+    /// Whether it writes pixel depth offset (selects the `frag_depth` pipeline).
+    pub pixel_depth_offset: bool,
+    /// The height field's GPU textures (mips, normals, parallax map, pyramid), if it has one.
+    pub height: Option<HeightMaps>,
+    height_options: HeightPassOptions,
+    /// The bind group to set at index 1.
+    pub bind_group: wgpu::BindGroup,
+}
+
+impl GpuMaterial {
+    /// Uploads `material` to draw with `technique`, and rebuilds its height maps on the GPU
+    /// (mips, normals, parallax map, maximum-height pyramid). `normal_filter` is the filter of
+    /// the normals computed from the height map when the material has no normal map of its own
+    /// (the CPU renderer uses central differences; Sobel is smoother for dynamic fields).
+    ///
+    /// # Errors
+    /// [`GpuError::TooLarge`] for maps beyond the device's texture limit.
+    pub fn new(
+        ctx: &GpuContext,
+        pipelines: &MaterialPipelines,
+        material: &Material,
+        technique: Technique,
+        normal_filter: NormalFilter,
+    ) -> Result<Self, GpuError> {
+        let p = material.trace.sanitized();
+        let height_options = HeightPassOptions { edges: p.edges, depth_scale: p.depth_scale, filter: normal_filter };
+        let height = match &material.height {
+            Some(field) => {
+                let maps = HeightMaps::new(ctx, field.width(), field.height(), &material.name)?;
+                maps.upload_depths(ctx, field.depths())?;
+                Some(maps)
+            }
+            None => None,
+        };
+        let explicit_normals = material.normal_map.as_ref().map(|n| upload_normal_map(ctx, n)).transpose()?;
+        let albedo = {
+            let mut chain =
+                vec![material.albedo.as_ref().map_or_else(|| Texture::constant(Vec3::ONE), |t| (**t).clone())];
+            let limit = ctx.device.limits().max_texture_dimension_2d;
+            let base = &chain[0];
+            if base.width() > limit || base.height() > limit {
+                return Err(GpuError::TooLarge {
+                    what: format!("material \"{}\" albedo", material.name),
+                    width: base.width(),
+                    height: base.height(),
+                    limit,
+                });
+            }
+            while let Some(last) = chain.last().filter(|t| t.width() > 1 || t.height() > 1) {
+                let next = last.downsample();
+                chain.push(next);
+            }
+            chain
+        };
+        let albedo_tex =
+            texture_with_mips(ctx, "pomkit albedo", wgpu::TextureFormat::Rgba16Float, &rgba_levels(&albedo));
+        let address = match p.edges {
+            EdgeMode::Wrap => wgpu::AddressMode::Repeat,
+            EdgeMode::Clamp => wgpu::AddressMode::ClampToEdge,
+        };
+        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("pomkit material"),
+            address_mode_u: address,
+            address_mode_v: address,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let field = material.height.as_deref();
+        let has_normals = explicit_normals.is_some() || field.is_some_and(|f| f.width() >= 2 && f.height() >= 2);
+        let mut u = Std140::new();
+        u.vec4(material.base_color.extend(1.0).to_array());
+        u.f(material.specular).f(material.shininess).f(p.depth_scale).f(material.lod_threshold);
+        u.u(p.min_samples).u(p.max_samples).u(p.samples).u(p.iterations);
+        u.u(p.binary_steps).u(p.refine).u(shadow_index(material.shadow.mode)).u(match p.edges {
+            EdgeMode::Wrap => 0,
+            EdgeMode::Clamp => 1,
+        });
+        let softness = if material.shadow.softness.is_finite() { material.shadow.softness } else { 0.1 };
+        u.f(p.perspective_bias).f(softness).u(u32::from(field.is_some())).u(u32::from(has_normals));
+        let (hw, hh) = field.map_or((1, 1), |f| (f.width(), f.height()));
+        let max_level = (hw.max(hh) as f32).log2().floor();
+        let levels = height.as_ref().map_or(1, |m| m.pyramid_levels);
+        u.f(hw as f32).f(hh as f32).f(max_level).u(levels);
+        u.f(albedo[0].width() as f32).f(albedo[0].height() as f32).f((albedo.len() - 1) as f32);
+        u.u(u32::from(material.pixel_depth_offset));
+        let uniforms = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("pomkit material"),
+            contents: &u.bytes(),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let albedo_view = albedo_tex.create_view(&Default::default());
+        let d = &pipelines.dummy;
+        let (heights_view, pyramid_view) =
+            height.as_ref().map_or((&d.heights, &d.pyramid), |m| (&m.heights_view, &m.pyramid_view));
+        let explicit_view = explicit_normals.as_ref().map(|t| t.create_view(&Default::default()));
+        let normals_view = match (&explicit_view, &height) {
+            (Some(v), _) => v,
+            (None, Some(m)) => &m.normals_view,
+            (None, None) => &d.normals,
+        };
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&material.name),
+            layout: &pipelines.material_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: uniforms.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(heights_view) },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(normals_view) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(pyramid_view) },
+                wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&albedo_view) },
+                wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::Sampler(&sampler) },
+            ],
+        });
+        Ok(Self { technique, pixel_depth_offset: material.pixel_depth_offset, height, height_options, bind_group })
+    }
+
+    /// Records the compute passes that rebuild the height maps from mip 0 of the height
+    /// texture (after [`GpuMaterial::update_height`] or a compute shader of yours wrote it).
+    pub fn encode_rebuild(
+        &self,
+        device: &wgpu::Device,
+        pipelines: &MaterialPipelines,
+        encoder: &mut wgpu::CommandEncoder,
+        timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) {
+        if let Some(maps) = &self.height {
+            pipelines.passes.encode(device, encoder, maps, &self.height_options, timestamps);
+        }
+    }
+
+    /// Uploads a new height field of the same size (a dynamic height field: call each frame,
+    /// then [`GpuMaterial::encode_rebuild`]).
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] if the material has no height map or the size differs.
+    pub fn update_height(&self, ctx: &GpuContext, field: &HeightField) -> Result<(), GpuError> {
+        let maps = self
+            .height
+            .as_ref()
+            .ok_or_else(|| GpuError::Unsupported("updating the height of a material without a height map".into()))?;
+        if (maps.width, maps.height) != (field.width(), field.height()) {
+            return Err(GpuError::Unsupported(format!(
+                "changing a height map's size from {}x{} to {}x{} (create a new GpuMaterial)",
+                maps.width,
+                maps.height,
+                field.width(),
+                field.height()
+            )));
+        }
+        maps.upload_depths(ctx, field.depths())
+    }
+}
+
+fn upload_normal_map(ctx: &GpuContext, n: &NormalMap) -> Result<wgpu::Texture, GpuError> {
+    let limit = ctx.device.limits().max_texture_dimension_2d;
+    if n.width() > limit || n.height() > limit {
+        return Err(GpuError::TooLarge { what: "normal map".into(), width: n.width(), height: n.height(), limit });
+    }
+    let values: Vec<f32> = n.normals().iter().flat_map(|v| [v.x, v.y, v.z, 0.0]).collect();
+    Ok(texture_with_mips(
+        ctx,
+        "pomkit normal map",
+        wgpu::TextureFormat::Rgba16Float,
+        &[(n.width(), n.height(), rgba16f_bytes(&values))],
+    ))
+}
+
+/// A mesh's vertex and index buffers.
+pub struct GpuMesh {
+    /// Interleaved vertices (see the shader's `VertexIn`).
+    pub vertices: wgpu::Buffer,
+    /// `u32` triangle list.
+    pub indices: wgpu::Buffer,
+    /// Index count.
+    pub index_count: u32,
+}
+
+impl GpuMesh {
+    /// Uploads `mesh`; `depths`, when given, is each vertex's depth below the polygon (for
+    /// `displaced` geometry), else 0.
+    #[must_use]
+    pub fn new(ctx: &GpuContext, mesh: &Mesh, depths: Option<&[f32]>) -> Self {
+        let mut data = Vec::with_capacity(mesh.positions.len() * VERTEX_FLOATS);
+        for i in 0..mesh.positions.len() {
+            let (p, n, t, uv, s) =
+                (mesh.positions[i], mesh.normals[i], mesh.tangents[i], mesh.uvs[i], mesh.uv_scale[i]);
+            let d = depths.and_then(|d| d.get(i)).copied().unwrap_or(0.0);
+            data.extend_from_slice(&[p.x, p.y, p.z, n.x, n.y, n.z, t.x, t.y, t.z, t.w, uv.x, uv.y, s.x, s.y, d]);
+        }
+        let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let vertices = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("pomkit vertices"),
+            contents: &bytes,
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let ibytes: Vec<u8> = mesh.indices.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let indices = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("pomkit indices"),
+            contents: &ibytes,
+            usage: wgpu::BufferUsages::INDEX,
+        });
+        Self { vertices, indices, index_count: mesh.indices.len() as u32 }
+    }
+}
+
+/// An object's model matrix (bind group 2).
+pub struct GpuObject {
+    /// The bind group to set at index 2.
+    pub bind_group: wgpu::BindGroup,
+    buffer: wgpu::Buffer,
+}
+
+impl GpuObject {
+    /// An object with the model matrix `model`.
+    #[must_use]
+    pub fn new(ctx: &GpuContext, pipelines: &MaterialPipelines, model: Mat4) -> Self {
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pomkit object"),
+            size: 128,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("pomkit object"),
+            layout: &pipelines.object_layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() }],
+        });
+        let o = Self { bind_group, buffer };
+        o.set_model(ctx, model);
+        o
+    }
+
+    /// Sets the model matrix (normals use its cofactor matrix, sign-corrected for mirrors).
+    pub fn set_model(&self, ctx: &GpuContext, model: Mat4) {
+        let m = Mat3::from_mat4(model);
+        let (c0, c1, c2) = (m.x_axis, m.y_axis, m.z_axis);
+        let cof = Mat3::from_cols(c1.cross(c2), c2.cross(c0), c0.cross(c1));
+        let cof = if m.determinant() < 0.0 { -cof } else { cof };
+        let mut u = Std140::new();
+        u.mat4(model).mat4(Mat4::from_mat3(cof));
+        ctx.queue.write_buffer(&self.buffer, 0, &u.bytes());
+    }
+}

@@ -1,0 +1,399 @@
+//! Headless rendering of a [`Scene`] to linear colour and AOVs, as `pomkit-cpu` does.
+
+use std::time::Instant;
+
+use glam::{Mat4, Vec2, Vec3};
+use pomkit_core::bake::NormalFilter;
+use pomkit_core::render::{Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve};
+use pomkit_core::scene::Scene;
+use pomkit_core::trace::Technique;
+
+use crate::material::{AOV_FORMATS, FrameUniforms, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
+use crate::{GpuContext, GpuError};
+
+/// Why a GPU render could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuRenderError {
+    /// The scene or options are invalid (the same checks as the CPU renderer).
+    #[error(transparent)]
+    Scene(#[from] RenderError),
+    /// The device failed or lacks something.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+/// Times of the last frame, in milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Timings {
+    /// The compute passes that rebuilt height maps (mips, normals, parallax, pyramid).
+    pub height_passes_ms: f64,
+    /// The render pass (every object, every pixel traced and shaded).
+    pub render_pass_ms: f64,
+    /// Whether the two figures above come from GPU timestamp queries (else wall-clock time of
+    /// submit and wait, which includes the driver's overhead).
+    pub from_timestamps: bool,
+    /// Wall-clock time of the whole `render` call, uploads and readback included.
+    pub wall_ms: f64,
+}
+
+/// The GPU renderer: `GpuRenderer::new(ctx)` then `render(&scene, &options)`.
+pub struct GpuRenderer {
+    ctx: GpuContext,
+    pipelines: MaterialPipelines,
+    timings: Timings,
+}
+
+const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+impl GpuRenderer {
+    /// A renderer on `ctx`'s device.
+    #[must_use]
+    pub fn new(ctx: GpuContext) -> Self {
+        let pipelines = MaterialPipelines::new(&ctx);
+        Self { ctx, pipelines, timings: Timings::default() }
+    }
+
+    /// The device.
+    #[must_use]
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    /// The shader pipelines (for drawing into your own passes).
+    pub fn pipelines_mut(&mut self) -> &mut MaterialPipelines {
+        &mut self.pipelines
+    }
+
+    /// Times of the last [`GpuRenderer::render`].
+    #[must_use]
+    pub fn timings(&self) -> Timings {
+        self.timings
+    }
+
+    /// Renders `scene` as the CPU renderer does (same options, same output types).
+    ///
+    /// # Errors
+    /// [`GpuRenderError::Scene`] for a bad size, a dangling material index or invalid trace
+    /// parameters; [`GpuRenderError::Gpu`] for device failures, more than 4 lights, or maps
+    /// beyond the device's limits.
+    pub fn render(&mut self, scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, GpuRenderError> {
+        // wgpu reports validation errors and allocation failures to an error scope if one is
+        // open (else its default handler panics): turn them into errors.
+        let oom = self.ctx.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = self.render_inner(scene, opts);
+        let errors = [pollster::block_on(validation.pop()), pollster::block_on(oom.pop())];
+        if let Some(e) = errors.into_iter().flatten().next() {
+            return Err(GpuError::Device(e.to_string()).into());
+        }
+        result
+    }
+
+    fn render_inner(&mut self, scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, GpuRenderError> {
+        let mut prepared = self.prepare_inner(scene, opts)?;
+        self.draw_inner(&mut prepared, scene)
+    }
+
+    /// Uploads `scene` for drawing with `opts` (meshes, materials, camera, lights): the retained
+    /// form for rendering many frames, with height maps that may change between them
+    /// ([`GpuScene::set_height`]).
+    ///
+    /// # Errors
+    /// As [`GpuRenderer::render`].
+    pub fn prepare(&mut self, scene: &Scene, opts: &RenderOptions) -> Result<GpuScene, GpuRenderError> {
+        let validation = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = self.prepare_inner(scene, opts);
+        if let Some(e) = pollster::block_on(validation.pop()) {
+            return Err(GpuError::Device(e.to_string()).into());
+        }
+        result
+    }
+
+    /// Draws a prepared scene: rebuilds the height maps that changed since the last draw (on the
+    /// GPU, by the compute passes), renders, and reads the pixels back. `scene` supplies the
+    /// background colour and must be the scene `gpu_scene` was prepared from.
+    ///
+    /// # Errors
+    /// [`GpuRenderError::Gpu`] for device failures.
+    pub fn draw(&mut self, gpu_scene: &mut GpuScene, scene: &Scene) -> Result<RenderOutput, GpuRenderError> {
+        let validation = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = self.draw_inner(gpu_scene, scene);
+        if let Some(e) = pollster::block_on(validation.pop()) {
+            return Err(GpuError::Device(e.to_string()).into());
+        }
+        result
+    }
+
+    fn prepare_inner(&mut self, scene: &Scene, opts: &RenderOptions) -> Result<GpuScene, GpuRenderError> {
+        let ss = opts.supersample.clamp(1, 8);
+        let (w, h) = (opts.width, opts.height);
+        if w == 0 || h == 0 || w > 16384 || h > 16384 {
+            return Err(RenderError::Size { width: w, height: h }.into());
+        }
+        let (sw, sh) = (w * ss, h * ss);
+        let limit = self.ctx.device.limits().max_texture_dimension_2d;
+        if sw > limit || sh > limit {
+            return Err(GpuError::TooLarge { what: "render target".into(), width: sw, height: sh, limit }.into());
+        }
+        for obj in &scene.objects {
+            if obj.material >= scene.materials.len() {
+                return Err(RenderError::Material {
+                    object: obj.name.clone(),
+                    index: obj.material,
+                    count: scene.materials.len(),
+                }
+                .into());
+            }
+        }
+        let ctx = &self.ctx;
+        let frame = FrameUniforms::new(ctx, &self.pipelines);
+        frame.write(ctx, &scene.camera, sw as f32 / sh as f32, &scene.lights, scene.ambient, opts.lod_tint)?;
+
+        // Materials: textures, uniforms; height maps rebuilt by the compute passes.
+        let mut materials = Vec::with_capacity(scene.materials.len());
+        for m in &scene.materials {
+            m.trace.validate().map_err(|e| RenderError::Params { material: m.name.clone(), reason: e.to_string() })?;
+            let technique = match opts.mode {
+                Mode::Technique(t) => t,
+                Mode::Displaced => Technique::Normal,
+                Mode::Material => m.technique,
+            };
+            materials.push(GpuMaterial::new(ctx, &self.pipelines, m, technique, NormalFilter::Central)?);
+        }
+        // Objects: world-space meshes (transformed on the CPU exactly as the CPU renderer does,
+        // mirrors included), identity model matrix.
+        let mut objects = Vec::with_capacity(scene.objects.len());
+        for obj in &scene.objects {
+            let m = &scene.materials[obj.material];
+            let p = m.trace.sanitized();
+            let displaced = opts.mode == Mode::Displaced && m.height.is_some();
+            let mesh = match (displaced, &m.height) {
+                (true, Some(field)) => {
+                    obj.mesh.displaced_for_shading(field, p.edges, p.depth_scale, opts.displaced_edge_texels)
+                }
+                _ => (*obj.mesh).clone(),
+            };
+            let world = mesh.transformed(obj.transform);
+            let depths: Option<Vec<f32>> = match (&m.height, displaced) {
+                (Some(field), true) => Some(world.uvs.iter().map(|&uv| field.sample_bilinear(uv, p.edges)).collect()),
+                _ => None,
+            };
+            let gpu_mesh = GpuMesh::new(ctx, &world, depths.as_deref());
+            objects.push((obj.material, gpu_mesh, GpuObject::new(ctx, &self.pipelines, Mat4::IDENTITY)));
+        }
+
+        let targets = Targets { color: COLOR, aovs: true, depth: DEPTH };
+        for (mat, gm) in scene.materials.iter().zip(&materials) {
+            self.pipelines.pipeline(&ctx.device, gm.technique, mat.pixel_depth_offset, targets);
+        }
+        let dirty = vec![true; materials.len()];
+        Ok(GpuScene { frame, materials, objects, dirty, width: w, height: h, ss, aovs: opts.aovs })
+    }
+
+    fn draw_inner(&mut self, gs: &mut GpuScene, scene: &Scene) -> Result<RenderOutput, GpuRenderError> {
+        let start = Instant::now();
+        let ctx = &self.ctx;
+        let targets = Targets { color: COLOR, aovs: true, depth: DEPTH };
+        let (w, h, ss) = (gs.width, gs.height, gs.ss);
+        let (sw, sh) = (w * ss, h * ss);
+        let (materials, objects) = (&gs.materials, &gs.objects);
+        let make = |label: &str, format: wgpu::TextureFormat, usage: wgpu::TextureUsages| {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width: sw, height: sh, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+        let color = make("pomkit colour", COLOR, rt);
+        let aov0 = make("pomkit aov0", AOV_FORMATS[0], rt);
+        let aov1 = make("pomkit aov1", AOV_FORMATS[1], rt);
+        let depth = make("pomkit depth", DEPTH, wgpu::TextureUsages::RENDER_ATTACHMENT);
+        let views: Vec<wgpu::TextureView> =
+            [&color, &aov0, &aov1, &depth].iter().map(|t| t.create_view(&Default::default())).collect();
+
+        let queries = ctx.timestamps.then(|| {
+            let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("pomkit timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 4,
+            });
+            let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pomkit timestamps"),
+                size: 32,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pomkit timestamps read"),
+                size: 32,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            });
+            (set, resolve, read)
+        });
+
+        // Compute: rebuild every height map.
+        ctx.wait()?;
+        let t_compute = Instant::now();
+        let mut enc =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pomkit heights") });
+        let mut first = true;
+        let rebuild = |i: usize| gs.dirty[i] && materials[i].height.is_some();
+        let last = (0..materials.len()).rev().find(|&i| rebuild(i));
+        for (i, m) in materials.iter().enumerate() {
+            if !rebuild(i) {
+                continue;
+            }
+            let (begin, end) = (first.then_some(0), (Some(i) == last).then_some(1));
+            let ts = queries.as_ref().filter(|_| begin.is_some() || end.is_some()).map(|(set, _, _)| {
+                wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: begin,
+                    end_of_pass_write_index: end,
+                }
+            });
+            first = false;
+            m.encode_rebuild(&ctx.device, &self.pipelines, &mut enc, ts);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        gs.dirty.iter_mut().for_each(|d| *d = false);
+        let compute_wall = t_compute.elapsed().as_secs_f64() * 1e3;
+
+        // Render.
+        let t_render = Instant::now();
+        let mut enc =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pomkit render") });
+        {
+            let attachment = |view| {
+                Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })
+            };
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("pomkit scene"),
+                color_attachments: &[attachment(&views[0]), attachment(&views[1]), attachment(&views[2])],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &views[3],
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: queries.as_ref().map(|(set, _, _)| wgpu::RenderPassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(2),
+                    end_of_pass_write_index: Some(3),
+                }),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &gs.frame.bind_group, &[]);
+            for (mi, mesh, object) in objects {
+                let gm = &materials[*mi];
+                let Some(pipeline) = self.pipelines.cached(gm.technique, gm.pixel_depth_offset, targets) else {
+                    continue;
+                };
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(1, &gm.bind_group, &[]);
+                pass.set_bind_group(2, &object.bind_group, &[]);
+                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+            }
+        }
+        if let Some((set, resolve, read)) = &queries {
+            enc.resolve_query_set(set, 0..4, resolve, 0);
+            enc.copy_buffer_to_buffer(resolve, 0, read, 0, 32);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        let render_wall = t_render.elapsed().as_secs_f64() * 1e3;
+
+        let mut timings = Timings { height_passes_ms: compute_wall, render_pass_ms: render_wall, ..Timings::default() };
+        if let Some((_, _, read)) = &queries {
+            let bytes = ctx.read_buffer(read)?;
+            let stamp = |i: usize| u64::from_le_bytes(bytes[i * 8..i * 8 + 8].try_into().unwrap_or([0; 8]));
+            let period = f64::from(ctx.queue.get_timestamp_period()) * 1e-6;
+            let has_compute = last.is_some();
+            timings.height_passes_ms =
+                if has_compute { stamp(1).saturating_sub(stamp(0)) as f64 * period } else { 0.0 };
+            timings.render_pass_ms = stamp(3).saturating_sub(stamp(2)) as f64 * period;
+            timings.from_timestamps = true;
+        }
+
+        // Read back and resolve exactly as the CPU renderer does.
+        let c = ctx.read_texture(&color, 0)?;
+        let a0 = ctx.read_texture(&aov0, 0)?;
+        let a1 = ctx.read_texture(&aov1, 0)?;
+        let samples: Vec<Option<Sample>> = (0..(sw * sh) as usize)
+            .map(|i| {
+                let k = i * 4;
+                (a1[k + 2] > 0.5).then(|| Sample {
+                    color: Vec3::new(c[k], c[k + 1], c[k + 2]),
+                    z: 0.0,
+                    uv: Vec2::new(a0[k], a0[k + 1]),
+                    depth: a0[k + 2],
+                    shadow: a0[k + 3],
+                    fetches: a1[k],
+                    lod: a1[k + 1],
+                })
+            })
+            .collect();
+        timings.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        self.timings = timings;
+        Ok(resolve(&samples, w, h, ss, scene.background, gs.aovs))
+    }
+}
+
+/// A scene uploaded to the GPU ([`GpuRenderer::prepare`]), drawn by [`GpuRenderer::draw`].
+pub struct GpuScene {
+    frame: FrameUniforms,
+    materials: Vec<GpuMaterial>,
+    objects: Vec<(usize, GpuMesh, GpuObject)>,
+    dirty: Vec<bool>,
+    width: u32,
+    height: u32,
+    ss: u32,
+    aovs: bool,
+}
+
+impl GpuScene {
+    /// Replaces material `index`'s height field with `field` (same size): a dynamic height
+    /// field. The next [`GpuRenderer::draw`] rebuilds its mips, normals, parallax map and
+    /// maximum-height pyramid on the GPU before rendering.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] for an index out of range, a material without a height map or
+    /// a different size.
+    pub fn set_height(
+        &mut self,
+        ctx: &GpuContext,
+        index: usize,
+        field: &pomkit_core::HeightField,
+    ) -> Result<(), GpuError> {
+        let m = self.materials.get(index).ok_or_else(|| {
+            GpuError::Unsupported(format!("material {index} does not exist ({} materials)", self.materials.len()))
+        })?;
+        m.update_height(ctx, field)?;
+        self.dirty[index] = true;
+        Ok(())
+    }
+
+    /// The uploaded materials, in scene order.
+    #[must_use]
+    pub fn materials(&self) -> &[GpuMaterial] {
+        &self.materials
+    }
+}
