@@ -146,13 +146,17 @@ pub fn shadow(
         ShadowMode::Exact => {
             let f = surface.field();
             let size = (f64::from(f.width()), f64::from(f.height()));
-            // Start a hair above the surface so the receiver does not shadow itself.
+            // The receiver may lie below the exact surface: an approximate technique's hit
+            // (pom's linear segments cut under the bilinear surface) or a coarser mip's. An
+            // exact ray from there starts inside the relief and shadows itself in speckles, so
+            // lift it onto the exact surface (one fetch), then a hair above it.
+            let on_surface = depth.min(f.sample_bilinear(uv, surface.edges()));
             let eps = 1e-5;
-            let z0 = (f64::from(depth) - eps).max(0.0);
+            let z0 = (f64::from(on_surface) - eps).max(0.0);
             let o = DVec3::new(f64::from(uv.x) * size.0, f64::from(uv.y) * size.1, z0);
             let d = DVec3::new(f64::from(s.x) * size.0, f64::from(s.y) * size.1, -1.0);
             let r = exact_first_hit(surface, o, d, eps.min(z0), z0);
-            Shadow { visibility: if r.t.is_some() { 0.0 } else { 1.0 }, fetches: r.fetches }
+            Shadow { visibility: if r.t.is_some() { 0.0 } else { 1.0 }, fetches: r.fetches + 1 }
         }
     }
 }
@@ -164,4 +168,29 @@ pub fn shadow(
 pub fn lod_weight(mip_level: f32, threshold: f32) -> f32 {
     let w = threshold - mip_level;
     if w.is_finite() { w.clamp(0.0, 1.0) } else { 1.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::heightfield::{EdgeMode, HeightField};
+
+    #[test]
+    fn exact_shadow_lifts_a_receiver_below_the_surface() {
+        // A flat surface at depth 0.5 with nothing above it: a receiver reported below it (as an
+        // approximate technique's hit can be) is lit, not shadowed by the surface it lies on.
+        let s = Surface::new(HeightField::constant(16, 16, 0.5), EdgeMode::Wrap, 0.1);
+        let p = ShadowParams { mode: ShadowMode::Exact, softness: 0.1 };
+        let light = Vec3::new(0.6, 0.2, 0.5);
+        for depth in [0.5, 0.55, 0.8] {
+            let sh = shadow(&s, Vec2::new(0.3, 0.7), depth, light, &p, &TraceParams::default());
+            assert_eq!(sh.visibility, 1.0, "receiver at depth {depth}");
+        }
+        // A real blocker still shadows: a wall toward the light, higher than the receiver.
+        let wall = HeightField::from_depths(16, 16, (0..256).map(|i| if i % 16 == 8 { 0.0 } else { 0.5 }).collect())
+            .expect("valid field");
+        let s = Surface::new(wall, EdgeMode::Wrap, 0.1);
+        let sh = shadow(&s, Vec2::new(6.5 / 16.0, 0.5), 0.55, Vec3::new(1.0, 0.0, 0.1), &p, &TraceParams::default());
+        assert_eq!(sh.visibility, 0.0);
+    }
 }

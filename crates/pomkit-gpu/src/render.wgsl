@@ -794,10 +794,14 @@ fn shadow(uv: vec2<f32>, depth_in: f32, light: vec3<f32>) -> f32 {
     let s = l.xy * (material.depth_scale / max(l.z, MIN_COS));
     if mode == S_EXACT {
         let size = material.height_size;
-        // Start a hair above the receiver so it does not shadow itself (f32: 1e-4 of the
-        // depth range; the CPU uses 1e-5 in f64).
+        // The receiver may lie below the exact surface (pom's linear segments cut under the
+        // bilinear surface; coarser mips differ from mip 0): an exact ray from there shadows
+        // itself in speckles. Lift it onto the exact surface (one fetch), then a hair above it
+        // (f32: 1e-4 of the depth range; the CPU uses 1e-5 in f64).
+        fetches += 1u;
+        let on_surface = min(depth, textureSampleLevel(heights, samp, uv, 0.0).r);
         let eps = 1e-4;
-        let z0 = max(depth - eps, 0.0);
+        let z0 = max(on_surface - eps, 0.0);
         let tile = entry_tile(uv);
         let o = vec3<f32>((uv - tile) * size, z0);
         let d = vec3<f32>(s * size, -1.0);
