@@ -241,11 +241,12 @@ impl MaterialPipelines {
         self.pipelines.entry(key).or_insert_with(|| {
             let constants = [("TECHNIQUE", f64::from(key.0))];
             let target = |format| wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL };
-            let color_targets = [
-                Some(target(targets.color)),
-                targets.aovs.then(|| target(AOV_FORMATS[0])),
-                targets.aovs.then(|| target(AOV_FORMATS[1])),
-            ];
+            // Without AOVs the pipeline has one target, so it fits a pass with one attachment
+            // (the shader's AOV outputs are then discarded).
+            let mut color_targets = vec![Some(target(targets.color))];
+            if targets.aovs {
+                color_targets.extend([Some(target(AOV_FORMATS[0])), Some(target(AOV_FORMATS[1]))]);
+            }
             let attributes = wgpu::vertex_attr_array![
                 0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x2, 4 => Float32x2, 5 => Float32
             ];
