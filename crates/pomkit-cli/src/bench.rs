@@ -1,5 +1,7 @@
-//! `pomkit bench`: whole frames of the built-in demo scene on the CPU renderer, timed per
-//! technique (DESIGN section 8: medians measured in one run, with the fetches that explain them).
+//! `pomkit bench`: whole frames of the built-in demo scene, timed per technique on the GPU
+//! renderer (GPU timestamp queries around its passes) and on the CPU renderer (wall clock around
+//! the render call), side by side (DESIGN section 8: medians measured in one run, with the
+//! fetches that explain them).
 
 use std::io::Write;
 use std::path::Path;
@@ -11,46 +13,84 @@ use clap::{Args, ValueEnum};
 use pomkit_core::scene::Scene;
 use pomkit_core::trace::Technique;
 use pomkit_cpu::{CpuRenderer, Mode, RenderOptions, RenderOutput};
+use pomkit_gpu::GpuRenderer;
 
+use crate::backend::{self, Backend, Opened};
 use crate::{output, progress, technique};
 
-/// The CSV header of the table.
-pub const CSV_HEADER: &str = "technique,width,height,runs,median_ms,mpix_per_s,fetches_per_pixel";
+/// The CSV header of the table: the CPU renderer's columns, then the GPU renderer's.
+pub const CSV_HEADER: &str = "technique,width,height,runs,median_ms,mpix_per_s,fetches_per_pixel,\
+gpu_runs,gpu_render_pass_ms,gpu_height_passes_ms,gpu_wall_ms,gpu_timer,gpu_fetches_per_pixel,gpu_over_cpu";
 
 #[derive(Args, Debug)]
 #[command(after_long_help = "\
-What is measured: the built-in demo scene (bricks, pyramids, cobblestones and raised text on a \
-plane, a cube, a sphere and a quad, every material with its soft self-shadows) rendered on the CPU \
-renderer with each listed technique in place of the materials' own. Each technique gets one \
-untimed warm-up frame, rendered with the AOVs on, which also gives the mean height fetches per \
-covered pixel (view trace plus shadow trace; covered = a pixel whose uv AOV is not zero). Then \
---runs frames are timed with std::time::Instant around the whole render call: preparing the \
-materials (tracing pyramids, baked normal maps, albedo mips), the vertex stage and triangle setup, \
-shading on all cores (rayon), and the resolve. Generating the scene's textures is not timed. \
+What is rendered: the built-in demo scene (bricks, pyramids, cobblestones and raised text on a \
+plane, a cube, a sphere and a quad, every material with its soft self-shadows), with each listed \
+technique in place of the materials' own (`material`: each material's own), at --size.
+
+GPU (pomkit-gpu, with --backend gpu, or auto when an adapter exists): per technique the scene is \
+prepared once (uploads, pipelines; not timed) and drawn once untimed (warm-up: shader \
+compilation, first-use allocations; its AOVs give the fetches), then drawn --gpu-runs more times. \
+Before each timed frame every height map is re-uploaded, as a dynamic height field would be, so \
+the compute passes that rebuild its mips, normals, parallax map and maximum-height pyramid run \
+every frame. The render pass (every object, every pixel traced, shadowed and shaded) and the \
+compute passes are timed apart with GPU timestamp queries when the adapter has them (else with \
+the wall clock around submit-and-wait, which includes driver overhead: the table says which). \
+The wall time of the whole frame (uploads, passes, readback of colour and AOVs, resolve) is \
+reported too. On a software adapter (lavapipe, llvmpipe, WARP) GPU times are CPU times.
+
+CPU (pomkit-cpu, on all cores with rayon): per technique one untimed warm-up frame with the AOVs \
+on (its fetches), then --cpu-runs frames timed with std::time::Instant around the whole render \
+call: preparing the materials (tracing pyramids, baked normal maps, albedo mips), the vertex stage \
+and triangle setup, shading, and the resolve. Generating the scene's textures is not timed. \
 median_ms is the median of those frames, mpix_per_s is width * height / median.
 
-With --displaced, the ground truth is added: the height-mapped meshes tessellated to one triangle \
-edge per texel and displaced for real, shaded with normal mapping and the materials' shadows. It \
-is timed once, with no warm-up (it takes minutes at 1280x720): the whole render call, \
-tessellation included, with the AOVs on (its fetches are the shadow trace's only). Standard error \
-also shows, per frame, the time until the first tile was shaded (setup: materials, tessellation, \
-vertex stage, triangle setup).
+Every figure is a median over the timed frames. gpu_over_cpu is the GPU render pass's median over \
+the CPU frame's median (below 1: the GPU is faster). Fetches are the mean height fetches per \
+covered pixel (view trace plus shadow trace; covered = a pixel whose uv AOV is not zero), from \
+each renderer's own warm-up frame.
 
-Formats: md, a Markdown table for people (rounded); csv, with the header \
-`technique,width,height,runs,median_ms,mpix_per_s,fetches_per_pixel` and full precision. The \
-table goes to standard output, progress to standard error.")]
+With --displaced, the ground truth is added on the CPU: the height-mapped meshes tessellated to \
+one triangle edge per texel and displaced for real, shaded with normal mapping and the materials' \
+shadows. It is timed once, with no warm-up (it takes minutes at 1280x720): the whole render call, \
+tessellation included, with the AOVs on (its fetches are the shadow trace's only). Standard error \
+also shows, per CPU frame, the time until the first tile was shaded (setup: materials, \
+tessellation, vertex stage, triangle setup), and every GPU frame's pass times.
+
+Formats: md, a Markdown table for people (rounded; without GPU columns when the GPU did not run, \
+without CPU columns with --cpu-runs 0); csv, with the header \
+`technique,width,height,runs,median_ms,mpix_per_s,fetches_per_pixel,gpu_runs,gpu_render_pass_ms,\
+gpu_height_passes_ms,gpu_wall_ms,gpu_timer,gpu_fetches_per_pixel,gpu_over_cpu` and full \
+precision (the first seven are the CPU's; a renderer that did not run leaves its fields empty and \
+its runs 0; gpu_timer is `timestamps` or `wall`). The table goes to standard output, progress to \
+standard error.")]
 pub struct BenchArgs {
     /// Image size.
-    #[arg(long, default_value = "1280x720", value_name = "WxH")]
+    #[arg(long, default_value = "1920x1080", value_name = "WxH")]
     size: String,
-    /// Timed frames per technique, after one untimed warm-up frame (1 to 1000).
-    #[arg(long, default_value_t = 5, value_name = "N")]
-    runs: u32,
-    /// Techniques to time, comma-separated: `all` or any of flat, normal, parallax, iterative,
-    /// steep, pom-classic, pom, relief, exact, and `material` for each material's own technique.
-    #[arg(long, default_value = "pom", value_name = "T,..")]
+    /// Timed frames per technique on both renderers, after the warm-up (1 to 1000); sets
+    /// --gpu-runs and --cpu-runs unless they are given.
+    #[arg(long, value_name = "N")]
+    runs: Option<u32>,
+    /// Timed GPU frames per technique, after one untimed warm-up frame (1 to 1000) [default: 5].
+    #[arg(long, value_name = "N")]
+    gpu_runs: Option<u32>,
+    /// Timed CPU frames per technique, after one untimed warm-up frame (0 to 1000; 0 times the
+    /// GPU only) [default: 3].
+    #[arg(long, value_name = "N")]
+    cpu_runs: Option<u32>,
+    /// Renderers: cpu (the CPU renderer only), gpu (the GPU renderer, with the CPU renderer's
+    /// time for the same frame beside it; fails without a GPU adapter) or auto (as gpu when an
+    /// adapter exists, else as cpu, saying why the GPU columns are missing).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    /// Techniques to time, comma-separated: any of flat, normal, parallax, iterative, steep,
+    /// pom-classic, pom, relief, exact, `all` for all of those, and `material` for each
+    /// material's own technique.
+    #[arg(long, default_value = "all,material", value_name = "T,..")]
     techniques: String,
-    /// Also time the `displaced` ground truth, once (slow: minutes at 1280x720).
+    /// Also time the `displaced` ground truth on the CPU renderer, once (slow: minutes at
+    /// 1280x720).
     #[arg(long)]
     displaced: bool,
     /// Output format.
@@ -69,10 +109,22 @@ pub enum Format {
 
 /// Most timed frames per technique accepted.
 const MAX_RUNS: u32 = 1000;
+/// Timed GPU frames per technique unless told.
+const DEFAULT_GPU_RUNS: u32 = 5;
+/// Timed CPU frames per technique unless told (the CPU renderer is slow at 1920x1080).
+const DEFAULT_CPU_RUNS: u32 = 3;
 
 /// One row of the table.
 struct Row {
     name: String,
+    /// `None` when the CPU renderer did not run.
+    cpu: Option<CpuStats>,
+    /// `None` when the GPU renderer did not run.
+    gpu: Option<GpuStats>,
+}
+
+/// The CPU renderer's figures for one technique.
+struct CpuStats {
     runs: u32,
     median_ms: f64,
     mpix_per_s: f64,
@@ -80,74 +132,225 @@ struct Row {
     fetches_per_pixel: Option<f64>,
 }
 
-/// Parses `--techniques`: `all`, technique names and `material`; duplicates dropped, order kept.
-fn parse_techniques(s: &str) -> Result<Vec<(String, Mode)>> {
-    if s.trim().eq_ignore_ascii_case("all") {
-        return Ok(Technique::ALL.iter().map(|t| (t.name().to_owned(), Mode::Technique(*t))).collect());
+/// The GPU renderer's figures for one technique (medians over the timed frames).
+struct GpuStats {
+    runs: u32,
+    render_pass_ms: f64,
+    height_passes_ms: f64,
+    wall_ms: f64,
+    /// Whether the pass times come from timestamp queries (else the wall clock).
+    from_timestamps: bool,
+    /// `None` when no pixel was covered.
+    fetches_per_pixel: Option<f64>,
+}
+
+impl Row {
+    /// The GPU render pass's median over the CPU frame's median.
+    fn gpu_over_cpu(&self) -> Option<f64> {
+        match (&self.cpu, &self.gpu) {
+            (Some(c), Some(g)) if c.median_ms > 0.0 => Some(g.render_pass_ms / c.median_ms),
+            _ => None,
+        }
     }
+}
+
+/// Parses `--techniques`: technique names, `all` and `material`; duplicates dropped, order kept.
+fn parse_techniques(s: &str) -> Result<Vec<(String, Mode)>> {
     let names = technique::names();
     let mut list: Vec<(String, Mode)> = Vec::new();
+    let mut add = |name: &str, mode: Mode| {
+        if !list.iter().any(|(_, m)| *m == mode) {
+            list.push((name.to_owned(), mode));
+        }
+    };
     for part in s.split(',') {
         let t = part.trim();
-        let mode = if t.is_empty() {
+        if t.is_empty() {
             bail!("--techniques '{s}': empty name in the list; expected 'all' or names from: {}, material", names);
+        } else if t.eq_ignore_ascii_case("all") {
+            Technique::ALL.iter().for_each(|t| add(t.name(), Mode::Technique(*t)));
         } else if t.eq_ignore_ascii_case("material") {
-            Mode::Material
+            add("material", Mode::Material);
         } else if t.eq_ignore_ascii_case("displaced") {
             bail!("--techniques '{s}': the displaced ground truth is timed once with --displaced, not in the list");
         } else {
-            Mode::Technique(t.parse().map_err(|e| anyhow::anyhow!("--techniques: {e}, material"))?)
-        };
-        if !list.iter().any(|(_, m)| *m == mode) {
-            list.push((t.to_ascii_lowercase(), mode));
+            let technique: Technique = t.parse().map_err(|e| anyhow::anyhow!("--techniques: {e}, material"))?;
+            add(&t.to_ascii_lowercase(), Mode::Technique(technique));
         }
     }
     Ok(list)
 }
 
+/// Checks a frame count against `min..=MAX_RUNS`, naming `flag`.
+fn check_runs(flag: &str, n: u32, min: u32) -> Result<u32> {
+    if !(min..=MAX_RUNS).contains(&n) {
+        bail!("{flag} {n}: give between {min} and {MAX_RUNS} timed frames per technique");
+    }
+    Ok(n)
+}
+
 pub fn run(a: &BenchArgs) -> Result<()> {
     let (w, h) = crate::parse_size(&a.size).context("--size")?;
-    if !(1..=MAX_RUNS).contains(&a.runs) {
-        bail!("--runs {}: give between 1 and {MAX_RUNS} timed frames per technique", a.runs);
+    if let Some(n) = a.runs {
+        check_runs("--runs", n, 1)?;
     }
+    let gpu_runs = check_runs("--gpu-runs", a.gpu_runs.or(a.runs).unwrap_or(DEFAULT_GPU_RUNS), 1)?;
+    let cpu_runs = check_runs("--cpu-runs", a.cpu_runs.or(a.runs).unwrap_or(DEFAULT_CPU_RUNS), 0)?;
     let modes = parse_techniques(&a.techniques)?;
+    if cpu_runs == 0 && a.backend == Backend::Cpu {
+        bail!("--cpu-runs 0 with --backend cpu leaves nothing to time");
+    }
+    if cpu_runs == 0 && a.displaced {
+        bail!("--displaced times the CPU renderer: it needs --cpu-runs of at least 1");
+    }
+    let (mut gpu, skipped) = match backend::open(a.backend)? {
+        Opened::Gpu(g) => (Some(g), None),
+        Opened::CpuAskedFor => (None, None),
+        Opened::NoGpu(reason) => {
+            eprintln!("GPU columns skipped: {reason}");
+            (None, Some(reason))
+        }
+    };
+    if cpu_runs == 0 && gpu.is_none() {
+        bail!("--cpu-runs 0 leaves nothing to time: there is no GPU adapter");
+    }
     eprintln!("generating the demo scene (not timed)");
     let scene = pomkit_core::demo::demo_scene();
     let base = RenderOptions { width: w, height: h, ..Default::default() };
     let mut rows = Vec::new();
     for (name, mode) in &modes {
         let opts = RenderOptions { mode: *mode, ..base };
-        let warm = frame(&scene, &RenderOptions { aovs: true, ..opts }, &format!("{name}: warm-up with AOVs"))?;
-        let fetches = fetches_per_covered_pixel(&warm.out);
-        let mut times = Vec::new();
-        let mut setups = Vec::new();
-        for i in 0..a.runs {
-            let f = frame(&scene, &opts, &format!("{name}: run {}/{}", i + 1, a.runs))?;
-            times.push(f.time);
-            setups.push(f.setup);
-        }
-        let med = median(&mut times);
-        eprintln!(
-            "{name}: median {:.1} ms, of which setup (until the first tile) {:.1} ms",
-            ms(med),
-            ms(median(&mut setups))
-        );
-        rows.push(row(name, a.runs, med, w, h, fetches));
+        let gpu_stats = match gpu.as_deref_mut() {
+            Some(g) => Some(gpu_frames(g, &scene, &opts, name, gpu_runs)?),
+            None => None,
+        };
+        let cpu_stats = if cpu_runs > 0 { Some(cpu_frames(&scene, &opts, name, cpu_runs)?) } else { None };
+        rows.push(Row { name: name.clone(), cpu: cpu_stats, gpu: gpu_stats });
     }
     if a.displaced {
         let opts = RenderOptions { mode: Mode::Displaced, aovs: true, ..base };
-        let f = frame(&scene, &opts, "displaced: one run (tessellation included, no warm-up)")?;
-        rows.push(row("displaced", 1, f.time, w, h, fetches_per_covered_pixel(&f.out)));
+        let f = frame(&scene, &opts, "displaced: one CPU run (tessellation included, no warm-up)")?;
+        let cpu = cpu_stats(1, f.time, w, h, fetches_per_covered_pixel(&f.out));
+        rows.push(Row { name: "displaced".into(), cpu: Some(cpu), gpu: None });
     }
-    let caption = format!(
-        "CPU renderer, demo scene at {w}x{h}: median of {} timed frame(s) per technique after one warm-up{}.",
-        a.runs,
-        if a.displaced { "; displaced: one frame, no warm-up, tessellation included" } else { "" }
-    );
+    let caption = caption(a, w, h, gpu.as_deref(), gpu_runs, cpu_runs, skipped.as_deref(), &rows);
     output::write_text(Path::new("-"), |wr| match a.format {
         Format::Md => write_md(wr, &caption, &rows, w, h),
         Format::Csv => write_csv(wr, &rows, w, h),
     })
+}
+
+/// What the Markdown table shows, for quoting.
+#[expect(clippy::too_many_arguments, reason = "one caption from every setting of the run")]
+fn caption(
+    a: &BenchArgs,
+    w: u32,
+    h: u32,
+    gpu: Option<&GpuRenderer>,
+    gpu_runs: u32,
+    cpu_runs: u32,
+    skipped: Option<&str>,
+    rows: &[Row],
+) -> String {
+    let mut parts = vec![format!("Demo scene at {w}x{h}.")];
+    if let Some(g) = gpu {
+        let timer = if rows.iter().filter_map(|r| r.gpu.as_ref()).all(|g| g.from_timestamps) {
+            "pass times from GPU timestamp queries"
+        } else {
+            "pass times from the wall clock around submit-and-wait (no timestamp queries on this adapter)"
+        };
+        let software = if g.context().is_software() { ", a software adapter: its times are CPU times" } else { "" };
+        parts.push(format!(
+            "GPU: {}{software}; median of {gpu_runs} frame(s) per technique, drawn after one warm-up from one \
+             prepared scene, height maps rebuilt every frame; {timer}.",
+            g.context().describe()
+        ));
+    }
+    if cpu_runs > 0 {
+        parts.push(format!(
+            "CPU: pomkit-cpu on {} thread(s); median of {cpu_runs} frame(s) per technique after one warm-up, \
+             whole render call{}.",
+            rayon::current_num_threads(),
+            if a.displaced { "; displaced: one frame, no warm-up, tessellation included" } else { "" }
+        ));
+    }
+    if gpu.is_some() && cpu_runs > 0 {
+        parts.push("GPU/CPU: GPU render pass over CPU frame.".into());
+    }
+    if let Some(reason) = skipped {
+        parts.push(format!("No GPU columns: {reason}."));
+    }
+    parts.push("Fetches: mean height fetches per covered pixel, view and shadow traces.".into());
+    parts.join(" ")
+}
+
+/// Times `runs` GPU frames of `opts` after a warm-up (DESIGN section 8: prepare once, draw
+/// repeatedly), reporting each on standard error.
+fn gpu_frames(gpu: &mut GpuRenderer, scene: &Scene, opts: &RenderOptions, name: &str, runs: u32) -> Result<GpuStats> {
+    let fail = || format!("cannot render ({name}) on the GPU");
+    let start = Instant::now();
+    // The GPU renderer always draws its AOVs; `aovs` only keeps them in the output.
+    let mut prepared = gpu.prepare(scene, &RenderOptions { aovs: true, ..*opts }).with_context(fail)?;
+    eprintln!("{name}: gpu prepare (uploads, pipelines): {:.1} ms", ms(start.elapsed()));
+    let warm = gpu.draw(&mut prepared, scene).with_context(fail)?;
+    report_gpu(gpu, &format!("{name}: gpu warm-up"));
+    let fetches = fetches_per_covered_pixel(&warm);
+    let heights: Vec<_> =
+        scene.materials.iter().enumerate().filter_map(|(i, m)| m.height.as_ref().map(|f| (i, f))).collect();
+    let (mut pass, mut height, mut wall, mut stamped) = (Vec::new(), Vec::new(), Vec::new(), true);
+    for i in 0..runs {
+        for (index, field) in &heights {
+            prepared.set_height(gpu.context(), *index, field).with_context(fail)?;
+        }
+        let out = gpu.draw(&mut prepared, scene).with_context(fail)?;
+        if out.color.iter().any(|c| !c.is_finite()) {
+            bail!("internal error: the GPU render ({name}) produced a non-finite pixel");
+        }
+        let t = report_gpu(gpu, &format!("{name}: gpu run {}/{runs}", i + 1));
+        pass.push(t.render_pass_ms);
+        height.push(t.height_passes_ms);
+        wall.push(t.wall_ms);
+        stamped &= t.from_timestamps;
+    }
+    Ok(GpuStats {
+        runs,
+        render_pass_ms: median_f64(&mut pass),
+        height_passes_ms: median_f64(&mut height),
+        wall_ms: median_f64(&mut wall),
+        from_timestamps: stamped,
+        fetches_per_pixel: fetches,
+    })
+}
+
+/// Prints the last GPU frame's times, labelled `what`, and returns them.
+fn report_gpu(gpu: &GpuRenderer, what: &str) -> pomkit_gpu::Timings {
+    let t = gpu.timings();
+    let timer = if t.from_timestamps { "timestamps" } else { "wall clock" };
+    eprintln!(
+        "{what}: render pass {:.1} ms, height passes {:.1} ms ({timer}); whole frame {:.1} ms",
+        t.render_pass_ms, t.height_passes_ms, t.wall_ms
+    );
+    t
+}
+
+/// Times `runs` CPU frames of `opts` after a warm-up with the AOVs on (which gives the fetches).
+fn cpu_frames(scene: &Scene, opts: &RenderOptions, name: &str, runs: u32) -> Result<CpuStats> {
+    let warm = frame(scene, &RenderOptions { aovs: true, ..*opts }, &format!("{name}: warm-up with AOVs"))?;
+    let fetches = fetches_per_covered_pixel(&warm.out);
+    let mut times = Vec::new();
+    let mut setups = Vec::new();
+    for i in 0..runs {
+        let f = frame(scene, opts, &format!("{name}: run {}/{runs}", i + 1))?;
+        times.push(f.time);
+        setups.push(f.setup);
+    }
+    let med = median(&mut times);
+    eprintln!(
+        "{name}: median {:.1} ms, of which setup (until the first tile) {:.1} ms",
+        ms(med),
+        ms(median(&mut setups))
+    );
+    Ok(cpu_stats(runs, med, opts.width, opts.height, fetches))
 }
 
 /// A timed frame.
@@ -202,14 +405,21 @@ fn median(v: &mut [Duration]) -> Duration {
     if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2 }
 }
 
+/// The median of finite numbers (the mean of the middle two for an even count). `v` must not be
+/// empty.
+fn median_f64(v: &mut [f64]) -> f64 {
+    v.sort_unstable_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 }
+}
+
 fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
 
-fn row(name: &str, runs: u32, median: Duration, w: u32, h: u32, fetches: Option<f64>) -> Row {
+fn cpu_stats(runs: u32, median: Duration, w: u32, h: u32, fetches: Option<f64>) -> CpuStats {
     let secs = median.as_secs_f64().max(1e-9);
-    Row {
-        name: name.to_owned(),
+    CpuStats {
         runs,
         median_ms: ms(median),
         mpix_per_s: f64::from(w) * f64::from(h) / secs / 1e6,
@@ -217,25 +427,93 @@ fn row(name: &str, runs: u32, median: Duration, w: u32, h: u32, fetches: Option<
     }
 }
 
+/// Milliseconds for people: more decimals for small values.
+fn round_ms(v: f64) -> String {
+    if v < 10.0 {
+        format!("{v:.2}")
+    } else if v < 100.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.0}")
+    }
+}
+
+fn round_fetches(f: Option<f64>) -> String {
+    f.map_or_else(|| "-".to_owned(), |f| format!("{f:.1}"))
+}
+
 fn write_md(wr: &mut dyn Write, caption: &str, rows: &[Row], w: u32, h: u32) -> std::io::Result<()> {
     writeln!(wr, "{caption}")?;
     writeln!(wr)?;
-    writeln!(wr, "| technique | size | runs | median ms/frame | Mpix/s | fetches per covered pixel |")?;
-    writeln!(wr, "|---|---|--:|--:|--:|--:|")?;
+    let (gpu, cpu) = (rows.iter().any(|r| r.gpu.is_some()), rows.iter().any(|r| r.cpu.is_some()));
+    if !gpu {
+        // The CPU renderer alone: the table of earlier versions, unchanged.
+        writeln!(wr, "| technique | size | runs | median ms/frame | Mpix/s | fetches per covered pixel |")?;
+        writeln!(wr, "|---|---|--:|--:|--:|--:|")?;
+        for r in rows {
+            let Some(c) = &r.cpu else { continue };
+            let rate =
+                if c.mpix_per_s < 10.0 { format!("{:.3}", c.mpix_per_s) } else { format!("{:.1}", c.mpix_per_s) };
+            let median =
+                if c.median_ms < 100.0 { format!("{:.1}", c.median_ms) } else { format!("{:.0}", c.median_ms) };
+            let fetches = round_fetches(c.fetches_per_pixel);
+            writeln!(wr, "| {} | {w}x{h} | {} | {median} | {rate} | {fetches} |", r.name, c.runs)?;
+        }
+        return Ok(());
+    }
+    let mut head = vec!["technique", "GPU render pass ms", "GPU height passes ms", "GPU whole frame ms"];
+    if cpu {
+        head.extend(["CPU ms/frame", "GPU/CPU"]);
+    }
+    head.push("fetches per covered pixel (GPU)");
+    if cpu {
+        head.push("(CPU)");
+    }
+    writeln!(wr, "| {} |", head.join(" | "))?;
+    writeln!(wr, "|---|{}", "--:|".repeat(head.len() - 1))?;
     for r in rows {
-        let fetches = r.fetches_per_pixel.map_or_else(|| "-".to_owned(), |f| format!("{f:.1}"));
-        let median = if r.median_ms < 100.0 { format!("{:.1}", r.median_ms) } else { format!("{:.0}", r.median_ms) };
-        let rate = if r.mpix_per_s < 10.0 { format!("{:.3}", r.mpix_per_s) } else { format!("{:.1}", r.mpix_per_s) };
-        writeln!(wr, "| {} | {w}x{h} | {} | {median} | {rate} | {fetches} |", r.name, r.runs)?;
+        let dash = || "-".to_owned();
+        let mut cells = vec![r.name.clone()];
+        match &r.gpu {
+            Some(g) => cells.extend([round_ms(g.render_pass_ms), round_ms(g.height_passes_ms), round_ms(g.wall_ms)]),
+            None => cells.extend([dash(), dash(), dash()]),
+        }
+        if cpu {
+            cells.push(r.cpu.as_ref().map_or_else(dash, |c| round_ms(c.median_ms)));
+            cells.push(r.gpu_over_cpu().map_or_else(dash, |x| format!("{x:.2}")));
+        }
+        cells.push(round_fetches(r.gpu.as_ref().and_then(|g| g.fetches_per_pixel)));
+        if cpu {
+            cells.push(round_fetches(r.cpu.as_ref().and_then(|c| c.fetches_per_pixel)));
+        }
+        writeln!(wr, "| {} |", cells.join(" | "))?;
     }
     Ok(())
 }
 
 fn write_csv(wr: &mut dyn Write, rows: &[Row], w: u32, h: u32) -> std::io::Result<()> {
+    fn opt(x: Option<f64>) -> String {
+        x.map_or_else(String::new, |f| f.to_string())
+    }
     writeln!(wr, "{CSV_HEADER}")?;
     for r in rows {
-        let fetches = r.fetches_per_pixel.map_or_else(String::new, |f| f.to_string());
-        writeln!(wr, "{},{w},{h},{},{},{},{fetches}", r.name, r.runs, r.median_ms, r.mpix_per_s)?;
+        let cpu = match &r.cpu {
+            Some(c) => format!("{},{},{},{}", c.runs, c.median_ms, c.mpix_per_s, opt(c.fetches_per_pixel)),
+            None => "0,,,".to_owned(),
+        };
+        let gpu = match &r.gpu {
+            Some(g) => format!(
+                "{},{},{},{},{},{}",
+                g.runs,
+                g.render_pass_ms,
+                g.height_passes_ms,
+                g.wall_ms,
+                if g.from_timestamps { "timestamps" } else { "wall" },
+                opt(g.fetches_per_pixel)
+            ),
+            None => "0,,,,,".to_owned(),
+        };
+        writeln!(wr, "{},{w},{h},{cpu},{gpu},{}", r.name, opt(r.gpu_over_cpu()))?;
     }
     Ok(())
 }

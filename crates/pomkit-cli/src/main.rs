@@ -1,6 +1,7 @@
 //! `pomkit`: the command line. Thin: every verb parses its flags, calls pomkit-core and
 //! pomkit-io, and reports. The flag names and formats are stable (DESIGN section 5).
 
+mod backend;
 mod bake;
 mod bench;
 mod compare;
@@ -29,7 +30,7 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Verb {
-    /// Render a scene (or, with none, the built-in demo scene) to a PNG.
+    /// Render a scene (or, with none, the built-in demo scene) to a PNG, on the GPU or the CPU.
     Render(render::RenderArgs),
     /// Bake normal, parallax or packed maps from a height map.
     #[command(subcommand)]
@@ -40,7 +41,7 @@ enum Verb {
     Trace(trace::TraceArgs),
     /// The accuracy table: each technique's error against `exact`, and its fetches, per view angle.
     Compare(compare::CompareArgs),
-    /// Time whole frames of the demo scene on the CPU renderer, per technique (see --help).
+    /// Time whole frames of the demo scene per technique, on the GPU and the CPU (see --help).
     Bench(bench::BenchArgs),
 }
 

@@ -25,7 +25,13 @@ pub fn bar(total: u64, texels_per_unit: u64, what: &str) -> ProgressBar {
 
 /// Runs `work` under a spinner labelled `what` when it covers enough texels to take a while.
 pub fn spinner<T>(texels: u64, what: &str, work: impl FnOnce() -> T) -> T {
-    if texels < MIN_TEXELS {
+    spinner_when(texels >= MIN_TEXELS, what, work)
+}
+
+/// Runs `work` under a spinner labelled `what` when `show` (and, by indicatif, stderr is a
+/// terminal): for work that reports no progress, such as a GPU frame.
+pub fn spinner_when<T>(show: bool, what: &str, work: impl FnOnce() -> T) -> T {
+    if !show {
         return work();
     }
     let pb = ProgressBar::new_spinner();
