@@ -26,8 +26,7 @@ fn gpu_available() -> bool {
     match reason {
         None => true,
         Some(e) => {
-            assert!(std::env::var("POMKIT_REQUIRE_GPU").as_deref() != Ok("1"), "POMKIT_REQUIRE_GPU=1 but: {e}");
-            println!("skipping: {e}");
+            pomkit_gpu::context::skip_without_gpu(e);
             false
         }
     }

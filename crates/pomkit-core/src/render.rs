@@ -4,6 +4,7 @@
 
 use glam::{Vec2, Vec3};
 
+use crate::scene::Scene;
 use crate::trace::Technique;
 
 /// Which geometry and technique the renderer uses.
@@ -103,6 +104,44 @@ impl RenderOutput {
 pub fn tone(c: Vec3) -> Vec3 {
     let c = if c.is_finite() { c.max(Vec3::ZERO) } else { Vec3::ZERO };
     c / (Vec3::ONE + c / 4.0)
+}
+
+impl Mode {
+    /// The technique a material whose own technique is `own` draws with in this mode
+    /// (`Displaced` shades its tessellated geometry with normal mapping).
+    #[must_use]
+    pub fn technique(self, own: Technique) -> Technique {
+        match self {
+            Mode::Technique(t) => t,
+            Mode::Displaced => Technique::Normal,
+            Mode::Material => own,
+        }
+    }
+}
+
+/// The checks every renderer makes before drawing, in this order: the image size (1 to 16384
+/// pixels a side), every object's material index, every material's trace parameters.
+///
+/// # Errors
+/// The first [`RenderError`] found.
+pub fn validate(scene: &Scene, opts: &RenderOptions) -> Result<(), RenderError> {
+    let (w, h) = (opts.width, opts.height);
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(RenderError::Size { width: w, height: h });
+    }
+    for obj in &scene.objects {
+        if obj.material >= scene.materials.len() {
+            return Err(RenderError::Material {
+                object: obj.name.clone(),
+                index: obj.material,
+                count: scene.materials.len(),
+            });
+        }
+    }
+    for m in &scene.materials {
+        m.trace.validate().map_err(|e| RenderError::Params { material: m.name.clone(), reason: e.to_string() })?;
+    }
+    Ok(())
 }
 
 /// Why a render could not run.

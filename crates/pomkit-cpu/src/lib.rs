@@ -37,7 +37,7 @@ use pomkit_core::trace::{Ray, Surface, Technique, TraceParams, trace};
 use pomkit_core::{EdgeMode, mip_level_from_gradients};
 use rayon::prelude::*;
 
-pub use pomkit_core::render::{Aovs, Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve};
+pub use pomkit_core::render::{Aovs, Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve, validate};
 
 use raster::{ClipVertex, Fragment, ScreenTriangle, Varyings, clip_near, setup};
 
@@ -93,13 +93,11 @@ impl CpuRenderer {
         opts: &RenderOptions,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<RenderOutput, RenderError> {
+        validate(scene, opts)?;
         let ss = opts.supersample.clamp(1, 8);
         let (w, h) = (opts.width, opts.height);
-        if w == 0 || h == 0 || w > 16384 || h > 16384 {
-            return Err(RenderError::Size { width: w, height: h });
-        }
         let (sw, sh) = (w * ss, h * ss);
-        let prepared = prepare(scene, opts)?;
+        let prepared = prepare(scene, opts);
         let triangles = self.triangles(scene, &prepared, opts, sw, sh);
         let samples = shade_tiles(scene, &prepared, &triangles, sw, sh, opts.lod_tint, progress);
         Ok(resolve(&samples, w, h, ss, scene.background, opts.aovs))
@@ -165,27 +163,14 @@ impl CpuRenderer {
     }
 }
 
-/// Prepares every material: surfaces for tracing, normal maps (baked when absent), albedo mips.
-fn prepare(scene: &Scene, opts: &RenderOptions) -> Result<Vec<Prepared>, RenderError> {
-    for obj in &scene.objects {
-        if obj.material >= scene.materials.len() {
-            return Err(RenderError::Material {
-                object: obj.name.clone(),
-                index: obj.material,
-                count: scene.materials.len(),
-            });
-        }
-    }
+/// Prepares every material (after [`validate`]): surfaces for tracing, normal maps (baked when
+/// absent), albedo mips.
+fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
     scene
         .materials
         .par_iter()
         .map(|m| {
-            m.trace.validate().map_err(|e| RenderError::Params { material: m.name.clone(), reason: e.to_string() })?;
-            let technique = match opts.mode {
-                Mode::Technique(t) => t,
-                Mode::Displaced => Technique::Normal,
-                Mode::Material => m.technique,
-            };
+            let technique = opts.mode.technique(m.technique);
             let params = m.trace.sanitized();
             let surface =
                 m.height.as_ref().map(|f| Arc::new(Surface::new((**f).clone(), params.edges, params.depth_scale)));
@@ -209,7 +194,7 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Result<Vec<Prepared>, RenderE
                 let next = last.downsample();
                 albedo.push(next);
             }
-            Ok(Prepared { material: m.clone(), surface, normals, albedo, technique, params })
+            Prepared { material: m.clone(), surface, normals, albedo, technique, params }
         })
         .collect()
 }

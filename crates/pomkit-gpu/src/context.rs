@@ -170,3 +170,17 @@ impl GpuContext {
         Ok(out)
     }
 }
+
+/// The rule pomkit's tests follow when there is no adapter: print `skipping: {reason}` so the
+/// test can return early, unless the environment sets `POMKIT_REQUIRE_GPU=1` (CI does), where a
+/// missing GPU is a failure.
+///
+/// # Panics
+/// When `POMKIT_REQUIRE_GPU=1`.
+pub fn skip_without_gpu(reason: &dyn std::fmt::Display) {
+    assert!(
+        std::env::var("POMKIT_REQUIRE_GPU").as_deref() != Ok("1"),
+        "POMKIT_REQUIRE_GPU=1 but the GPU is unavailable: {reason}"
+    );
+    println!("skipping: {reason}");
+}

@@ -4,9 +4,8 @@ use std::time::Instant;
 
 use glam::{Mat4, Vec2, Vec3};
 use pomkit_core::bake::NormalFilter;
-use pomkit_core::render::{Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve};
+use pomkit_core::render::{Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve, validate};
 use pomkit_core::scene::Scene;
-use pomkit_core::trace::Technique;
 
 use crate::material::{AOV_FORMATS, FrameUniforms, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
 use crate::{GpuContext, GpuError};
@@ -126,25 +125,13 @@ impl GpuRenderer {
     }
 
     fn prepare_inner(&mut self, scene: &Scene, opts: &RenderOptions) -> Result<GpuScene, GpuRenderError> {
+        validate(scene, opts)?;
         let ss = opts.supersample.clamp(1, 8);
         let (w, h) = (opts.width, opts.height);
-        if w == 0 || h == 0 || w > 16384 || h > 16384 {
-            return Err(RenderError::Size { width: w, height: h }.into());
-        }
         let (sw, sh) = (w * ss, h * ss);
         let limit = self.ctx.device.limits().max_texture_dimension_2d;
         if sw > limit || sh > limit {
             return Err(GpuError::TooLarge { what: "render target".into(), width: sw, height: sh, limit }.into());
-        }
-        for obj in &scene.objects {
-            if obj.material >= scene.materials.len() {
-                return Err(RenderError::Material {
-                    object: obj.name.clone(),
-                    index: obj.material,
-                    count: scene.materials.len(),
-                }
-                .into());
-            }
         }
         let ctx = &self.ctx;
         let frame = FrameUniforms::new(ctx, &self.pipelines);
@@ -153,12 +140,7 @@ impl GpuRenderer {
         // Materials: textures, uniforms; height maps rebuilt by the compute passes.
         let mut materials = Vec::with_capacity(scene.materials.len());
         for m in &scene.materials {
-            m.trace.validate().map_err(|e| RenderError::Params { material: m.name.clone(), reason: e.to_string() })?;
-            let technique = match opts.mode {
-                Mode::Technique(t) => t,
-                Mode::Displaced => Technique::Normal,
-                Mode::Material => m.technique,
-            };
+            let technique = opts.mode.technique(m.technique);
             materials.push(GpuMaterial::new(ctx, &self.pipelines, m, technique, NormalFilter::Central)?);
         }
         // Objects: world-space meshes (transformed on the CPU exactly as the CPU renderer does,

@@ -17,16 +17,7 @@ use pomkit_gpu::{GpuContext, GpuError};
 
 /// The device, or `None` (after printing why) when there is none and none is required.
 fn gpu() -> Option<GpuContext> {
-    match GpuContext::new() {
-        Ok(ctx) => Some(ctx),
-        Err(e) if std::env::var("POMKIT_REQUIRE_GPU").as_deref() == Ok("1") => {
-            panic!("POMKIT_REQUIRE_GPU=1 but no GPU: {e}")
-        }
-        Err(e) => {
-            println!("skipping: {e}");
-            None
-        }
-    }
+    GpuContext::new().map_err(|e| pomkit_gpu::context::skip_without_gpu(&e)).ok()
 }
 
 /// Encodes the passes, submits and waits.
