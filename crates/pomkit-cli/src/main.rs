@@ -43,6 +43,32 @@ enum Verb {
     Compare(compare::CompareArgs),
     /// Time whole frames of the demo scene per technique, on the GPU and the CPU (see --help).
     Bench(bench::BenchArgs),
+    /// The interactive viewer: tune a height map and its technique on the GPU renderer.
+    View(ViewArgs),
+}
+
+/// `pomkit view [SCENE] [--screenshot OUT.png]`.
+#[derive(Args, Debug)]
+struct ViewArgs {
+    /// Scene file to open (TOML; see docs/SCENES.md). Without one, the viewer restores the last
+    /// session, or opens a plane of built-in bricks.
+    scene: Option<PathBuf>,
+    /// Open the window, render until the view is complete, save the whole window to this PNG
+    /// and exit (for tests and documentation). The saved session is neither read nor changed.
+    #[arg(long, value_name = "OUT.png")]
+    screenshot: Option<PathBuf>,
+}
+
+fn view(args: &ViewArgs) -> Result<()> {
+    pomkit_viewer::run(pomkit_viewer::ViewerOptions {
+        scene: args.scene.clone(),
+        screenshot: args.screenshot.clone(),
+        ..Default::default()
+    })?;
+    if let Some(p) = &args.screenshot {
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
 }
 
 /// Where a height map comes from and how to read it, as a positional `IN` (the `bake` verbs).
@@ -194,6 +220,7 @@ fn main() -> ExitCode {
         Verb::Trace(args) => trace::run(args),
         Verb::Compare(args) => compare::run(args),
         Verb::Bench(args) => bench::run(args),
+        Verb::View(args) => view(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -417,9 +417,53 @@ pub fn parse_scene(text: &str, base_dir: &Path) -> Result<Scene, SceneError> {
 /// # Errors
 /// As [`load_scene`].
 pub fn parse_scene_named(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
+    parse_scene_cached(text, file, base_dir, &mut SceneCache::default())
+}
+
+/// Textures and meshes already loaded, kept between parses so that a program that re-reads a
+/// scene after every edit (the viewer) loads each file and generates each built-in map once.
+///
+/// Entries are keyed by path and load options, not by file contents: call
+/// [`SceneCache::clear`] to pick up files changed on disk.
+#[derive(Default)]
+pub struct SceneCache {
+    heights: HashMap<(Source, bool, Channel, bool), Arc<HeightField>>,
+    albedos: HashMap<Source, Arc<Texture>>,
+    normals: HashMap<(PathBuf, bool), Arc<NormalMap>>,
+    meshes: HashMap<PathBuf, Arc<Mesh>>,
+}
+
+impl SceneCache {
+    /// Forgets everything loaded.
+    pub fn clear(&mut self) {
+        *self = Self::default();
+    }
+
+    /// How many textures and meshes are held.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.heights.len() + self.albedos.len() + self.normals.len() + self.meshes.len()
+    }
+
+    /// Whether nothing is held.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// [`parse_scene_named`] with textures and meshes taken from, and added to, `cache`.
+///
+/// # Errors
+/// As [`load_scene`].
+pub fn parse_scene_cached(
+    text: &str,
+    file: &Path,
+    base_dir: &Path,
+    cache: &mut SceneCache,
+) -> Result<Scene, SceneError> {
     let parsed: SceneFile = toml::from_str(text).map_err(|e| syntax_error(file, text, &e))?;
-    let mut loader =
-        Loader { file, base: base_dir, heights: HashMap::new(), albedos: HashMap::new(), meshes: HashMap::new() };
+    let mut loader = Loader { file, base: base_dir, cache };
     loader.scene(parsed)
 }
 
@@ -516,9 +560,7 @@ enum Source {
 struct Loader<'a> {
     file: &'a Path,
     base: &'a Path,
-    heights: HashMap<(Source, bool, Channel, bool), Arc<HeightField>>,
-    albedos: HashMap<Source, Arc<Texture>>,
-    meshes: HashMap<PathBuf, Arc<Mesh>>,
+    cache: &'a mut SceneCache,
 }
 
 impl Loader<'_> {
@@ -785,12 +827,20 @@ impl Loader<'_> {
                 let y_down = m.normal_y_down.unwrap_or(false);
                 match self.source(at, "normal", n)? {
                     Source::File(path) => {
-                        Some(Arc::new(load_normal_map(&path, y_down).map_err(|source| SceneError::Texture {
-                            file: self.file.to_owned(),
-                            at: at.to_owned(),
-                            field: "normal".to_owned(),
-                            source: Box::new(source),
-                        })?))
+                        let key = (path, y_down);
+                        if let Some(n) = self.cache.normals.get(&key) {
+                            Some(n.clone())
+                        } else {
+                            let map =
+                                Arc::new(load_normal_map(&key.0, y_down).map_err(|source| SceneError::Texture {
+                                    file: self.file.to_owned(),
+                                    at: at.to_owned(),
+                                    field: "normal".to_owned(),
+                                    source: Box::new(source),
+                                })?);
+                            self.cache.normals.insert(key, map.clone());
+                            Some(map)
+                        }
                     }
                     Source::Builtin(..) => {
                         return Err(self.invalid(
@@ -876,7 +926,7 @@ impl Loader<'_> {
 
     fn height(&mut self, at: &str, source: Source, opts: HeightLoadOptions) -> Result<Arc<HeightField>, SceneError> {
         let key = (source, opts.depth_map, opts.channel, opts.normalize);
-        if let Some(f) = self.heights.get(&key) {
+        if let Some(f) = self.cache.heights.get(&key) {
             return Ok(f.clone());
         }
         let field = match &key.0 {
@@ -889,12 +939,12 @@ impl Loader<'_> {
             })?,
         };
         let field = Arc::new(field);
-        self.heights.insert(key, field.clone());
+        self.cache.heights.insert(key, field.clone());
         Ok(field)
     }
 
     fn albedo(&mut self, at: &str, source: Source) -> Result<Arc<Texture>, SceneError> {
-        if let Some(t) = self.albedos.get(&source) {
+        if let Some(t) = self.cache.albedos.get(&source) {
             return Ok(t.clone());
         }
         let texture = match &source {
@@ -911,7 +961,7 @@ impl Loader<'_> {
             })?,
         };
         let texture = Arc::new(texture);
-        self.albedos.insert(source, texture.clone());
+        self.cache.albedos.insert(source, texture.clone());
         Ok(texture)
     }
 
@@ -1064,7 +1114,7 @@ impl Loader<'_> {
 
     fn mesh_file(&mut self, at: &str, value: &str) -> Result<Arc<Mesh>, SceneError> {
         let path = self.base.join(value);
-        if let Some(m) = self.meshes.get(&path) {
+        if let Some(m) = self.cache.meshes.get(&path) {
             return Ok(m.clone());
         }
         let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
@@ -1085,7 +1135,7 @@ impl Loader<'_> {
             source: Box::new(source),
         })?;
         let mesh = Arc::new(mesh);
-        self.meshes.insert(path, mesh.clone());
+        self.cache.meshes.insert(path, mesh.clone());
         Ok(mesh)
     }
 }
