@@ -57,12 +57,31 @@ struct ViewArgs {
     /// and exit (for tests and documentation). The saved session is neither read nor changed.
     #[arg(long, value_name = "OUT.png")]
     screenshot: Option<PathBuf>,
+    /// Start in a split view: the material's technique on the left, this one on the right
+    /// (flat, normal, parallax, iterative, steep, pom-classic, pom, relief, exact).
+    #[arg(long, value_name = "TECHNIQUE")]
+    compare: Option<String>,
+    /// Start with an overlay: none, fetches (heat map of height fetches per pixel), lod-tint,
+    /// shadow (the light's visibility) or depth (hit depth).
+    #[arg(long, value_name = "NAME")]
+    overlay: Option<String>,
 }
 
 fn view(args: &ViewArgs) -> Result<()> {
+    let compare =
+        args.compare.as_deref().map(str::parse::<pomkit_core::trace::Technique>).transpose().context("--compare")?;
+    let overlay = args
+        .overlay
+        .as_deref()
+        .map(str::parse::<pomkit_viewer::view::Overlay>)
+        .transpose()
+        .map_err(anyhow::Error::msg)
+        .context("--overlay")?;
     pomkit_viewer::run(pomkit_viewer::ViewerOptions {
         scene: args.scene.clone(),
         screenshot: args.screenshot.clone(),
+        compare,
+        overlay,
         ..Default::default()
     })?;
     if let Some(p) = &args.screenshot {

@@ -161,6 +161,18 @@ impl ViewerApp {
         }
     }
 
+    /// Starts in a split view against `compare` and/or with `overlay` (command-line flags,
+    /// overriding the saved settings).
+    pub fn start_with(&mut self, compare: Option<Technique>, overlay: Option<Overlay>) {
+        if let Some(t) = compare {
+            self.settings.compare = true;
+            self.settings.compare_technique = t.name().to_owned();
+        }
+        if let Some(o) = overlay {
+            self.settings.overlay = o;
+        }
+    }
+
     /// The scene being tuned.
     #[must_use]
     pub fn doc(&self) -> &SceneDoc {

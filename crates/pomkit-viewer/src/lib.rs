@@ -32,6 +32,10 @@ pub struct ViewerOptions {
     pub size: Option<[f32; 2]>,
     /// Screenshot mode gives up after this long (default 300 s).
     pub timeout: Option<Duration>,
+    /// Start in a split view with this technique on the right.
+    pub compare: Option<pomkit_core::trace::Technique>,
+    /// Start with this overlay.
+    pub overlay: Option<view::Overlay>,
 }
 
 /// Why the viewer could not run.
@@ -73,6 +77,13 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     let doc = opts.scene.as_deref().map(SceneDoc::open).transpose()?;
     if let Some(p) = &opts.screenshot {
         pomkit_io::check_output(p, pomkit_io::PixelLayout::Rgb8)?;
+        let folder = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+        if !folder.is_dir() {
+            return Err(ViewerError::Screenshot {
+                path: p.clone(),
+                reason: format!("its folder {} does not exist", folder.display()),
+            });
+        }
     }
     let outcome: Arc<Mutex<Option<Result<(), String>>>> = Arc::default();
     let shot = opts.screenshot.clone().map(|path| app::ScreenshotJob {
@@ -96,8 +107,17 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         centered: shot.is_none(),
         ..Default::default()
     };
-    eframe::run_native("pomkit-viewer", native, Box::new(move |cc| Ok(Box::new(ViewerApp::new(cc, doc, shot)))))
-        .map_err(|e| ViewerError::Window(e.to_string()))?;
+    let (compare, overlay) = (opts.compare, opts.overlay);
+    eframe::run_native(
+        "pomkit-viewer",
+        native,
+        Box::new(move |cc| {
+            let mut app = ViewerApp::new(cc, doc, shot);
+            app.start_with(compare, overlay);
+            Ok(Box::new(app))
+        }),
+    )
+    .map_err(|e| ViewerError::Window(e.to_string()))?;
     if let Some(path) = opts.screenshot {
         let result = outcome.lock().ok().and_then(|mut o| o.take());
         match result {

@@ -36,6 +36,18 @@ impl Overlay {
     /// Every overlay.
     pub const ALL: [Overlay; 5] = [Overlay::None, Overlay::Fetches, Overlay::LodTint, Overlay::Shadow, Overlay::Depth];
 
+    /// Its name on the command line (`pomkit view --overlay`).
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Overlay::None => "none",
+            Overlay::Fetches => "fetches",
+            Overlay::LodTint => "lod-tint",
+            Overlay::Shadow => "shadow",
+            Overlay::Depth => "depth",
+        }
+    }
+
     /// Its name in the panel.
     #[must_use]
     pub fn label(self) -> &'static str {
@@ -66,6 +78,16 @@ impl Overlay {
                 "Depth of the hit below the polygon: black at the top of the relief, white at the deepest."
             }
         }
+    }
+}
+
+impl std::str::FromStr for Overlay {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Overlay::ALL.into_iter().find(|o| o.name().eq_ignore_ascii_case(s.trim())).ok_or_else(|| {
+            let names: Vec<&str> = Overlay::ALL.iter().map(|o| o.name()).collect();
+            format!("unknown overlay '{s}': expected one of {}", names.join(", "))
+        })
     }
 }
 
