@@ -638,3 +638,37 @@ fn missing_fields_are_not_blamed_on_their_neighbours() {
     let err = load_err(&with("material", "depth_scale = \"a\""));
     assert_eq!(err.field(), Some("depth_scale"), "{err}");
 }
+
+#[test]
+fn a_scene_cache_loads_each_file_once_until_cleared() {
+    use pomkit_io::scene::{SceneCache, parse_scene_cached};
+    let dir = tempfile::tempdir().unwrap();
+    let height: Vec<u8> = (0..64u32 * 64).map(|i| (i % 64 * 4) as u8).collect();
+    write_image(&dir.path().join("h.png"), 64, 64, PixelLayout::Gray8, Pixels::U8(&height)).unwrap();
+    let text = |depth: f32| {
+        format!(
+            "[camera]\neye = [0, 1, 2]\ntarget = [0, 0, 0]\n[[material]]\nname = \"m\"\nheight = \"h.png\"\n\
+             albedo = \"builtin:bricks:32x32\"\ndepth_scale = {depth}\n[[object]]\nmesh = \"sphere\"\nmaterial = \"m\"\n"
+        )
+    };
+    let file = dir.path().join("s.toml");
+    let mut cache = SceneCache::default();
+    let a = parse_scene_cached(&text(0.1), &file, dir.path(), &mut cache).unwrap();
+    assert_eq!(cache.len(), 2, "the height and albedo maps (built-in shapes are not cached)");
+    // An edit of a number reuses the loaded maps.
+    let b = parse_scene_cached(&text(0.05), &file, dir.path(), &mut cache).unwrap();
+    assert_eq!(b.materials[0].trace.depth_scale, 0.05);
+    assert!(Arc::ptr_eq(a.materials[0].height.as_ref().unwrap(), b.materials[0].height.as_ref().unwrap()));
+    assert!(Arc::ptr_eq(a.materials[0].albedo.as_ref().unwrap(), b.materials[0].albedo.as_ref().unwrap()));
+    // A changed file is picked up after clear().
+    let flat = vec![128u8; 64 * 64];
+    write_image(&dir.path().join("h.png"), 64, 64, PixelLayout::Gray8, Pixels::U8(&flat)).unwrap();
+    let stale = parse_scene_cached(&text(0.05), &file, dir.path(), &mut cache).unwrap();
+    assert!(Arc::ptr_eq(a.materials[0].height.as_ref().unwrap(), stale.materials[0].height.as_ref().unwrap()));
+    cache.clear();
+    assert!(cache.is_empty());
+    let fresh = parse_scene_cached(&text(0.05), &file, dir.path(), &mut cache).unwrap();
+    let f = fresh.materials[0].height.as_ref().unwrap();
+    let old = a.materials[0].height.as_ref().unwrap();
+    assert_ne!(f.depths()[10], old.depths()[10], "the new file's values");
+}

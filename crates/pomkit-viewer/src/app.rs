@@ -874,3 +874,61 @@ impl eframe::App for ViewerApp {
         self.persist
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashMap;
+
+    /// eframe's storage as a map (eframe writes the same RON strings to a file).
+    #[derive(Default)]
+    struct Memory(HashMap<String, String>);
+
+    impl eframe::Storage for Memory {
+        fn get_string(&self, key: &str) -> Option<String> {
+            self.0.get(key).cloned()
+        }
+        fn set_string(&mut self, key: &str, value: String) {
+            self.0.insert(key.to_owned(), value);
+        }
+        fn remove_string(&mut self, key: &str) {
+            self.0.remove(key);
+        }
+        fn flush(&mut self) {}
+    }
+
+    #[test]
+    fn a_session_survives_the_storage_round_trip() {
+        let mut doc = SceneDoc::default();
+        doc.set_material_field("technique", Some(Value::String("exact".into())));
+        doc.set_camera(Vec3::new(0.5, 1.0, 1.5), Vec3::ZERO);
+        let settings = Settings {
+            compare: true,
+            compare_technique: "steep".into(),
+            split: 0.3,
+            overlay: Overlay::Fetches,
+            overlay_opacity: 0.6,
+            fetch_scale: 20.0,
+            resolution: 0.5,
+            export_path: "out/x.png".into(),
+        };
+        let saved = Saved { scene: doc.to_toml(), material: 0, object: 0, settings: settings.clone() };
+        let mut storage = Memory::default();
+        eframe::set_value(&mut storage, STORAGE_KEY, &saved);
+        let back: Saved = eframe::get_value(&storage, STORAGE_KEY).expect("restores");
+        assert_eq!(back.settings, settings);
+        let restored = SceneDoc::from_text(&back.scene, Path::new(".")).expect("the scene parses");
+        assert_eq!(restored, doc);
+    }
+
+    #[test]
+    fn settings_from_an_older_version_fill_in_defaults() {
+        // A saved session that predates some fields still loads (serde default).
+        let mut storage = Memory::default();
+        eframe::Storage::set_string(&mut storage, STORAGE_KEY, "(settings: (compare: true))".into());
+        let back: Saved = eframe::get_value(&storage, STORAGE_KEY).expect("restores");
+        assert!(back.settings.compare);
+        assert_eq!(back.settings.overlay, Overlay::None);
+        assert_eq!(back.settings.resolution, 1.0);
+    }
+}
