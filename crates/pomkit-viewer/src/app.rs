@@ -672,7 +672,8 @@ impl ViewerApp {
         shadowed(
             rect.left_bottom() + Vec2::new(8.0, -8.0),
             egui::Align2::LEFT_BOTTOM,
-            "drag: orbit  shift/right-drag: pan  wheel: zoom  ctrl-drag: light".into(),
+            "drag: orbit  shift/right-drag: pan  wheel: zoom  ctrl-drag: light  double-click: reset  ctrl+q: quit"
+                .into(),
         );
         if let Some(e) = &self.error {
             painter.text(
@@ -850,6 +851,9 @@ impl eframe::App for ViewerApp {
                 Some(None) => self.browser = None,
                 None => {}
             }
+        }
+        if ctx.input(|i| i.modifiers.command && i.key_pressed(egui::Key::Q)) {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
         }
         self.screenshot_step(&ctx);
         if !self.complete() {
