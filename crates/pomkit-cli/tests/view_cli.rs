@@ -229,3 +229,82 @@ fn bad_scene_and_output_fail_before_opening_a_window() {
     assert!(!missing.status.success());
     assert!(stderr(&missing).contains("nowhere.toml"), "{}", stderr(&missing));
 }
+
+/// Runs `script` (sh) on a fresh Xvfb display with `xdotool` to drive the window. `None` (after
+/// "skipping") without xvfb-run or xdotool.
+fn xvfb_script(script: &str, data_home: &Path) -> Option<Output> {
+    for tool in ["xvfb-run", "xdotool"] {
+        if Command::new(tool).arg("--help").output().is_err() {
+            pomkit_gpu::context::skip_without_gpu(&format!("{tool} is not installed"));
+            return None;
+        }
+    }
+    let out = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x800x24", "sh", "-c", script])
+        .env("XDG_DATA_HOME", data_home)
+        .env("POMKIT", env!("CARGO_BIN_EXE_pomkit"))
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("xvfb-run runs");
+    Some(out)
+}
+
+/// The saved camera's eye, read from eframe's storage file.
+fn saved_eye(data_home: &Path) -> (Vec3, String) {
+    let text = std::fs::read_to_string(data_home.join("pomkit-viewer/app.ron")).expect("the session was saved");
+    let at = text.find("eye = [").expect("a camera in the saved scene") + "eye = [".len();
+    let end = at + text[at..].find(']').unwrap();
+    let v: Vec<f32> = text[at..end].split(',').map(|s| s.trim().parse().unwrap()).collect();
+    (Vec3::new(v[0], v[1], v[2]), text)
+}
+
+#[test]
+fn the_camera_and_view_settings_are_saved_and_restored_between_runs() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // First run: a split view against steep; orbit the camera by dragging right (left of the
+    // divider, which sits mid-view); quit.
+    let first = r#"
+        "$POMKIT" view --compare steep &
+        pid=$!
+        win=$(xdotool search --sync --name "pomkit view" | head -1)
+        sleep 3
+        xdotool windowfocus --sync "$win"
+        xdotool mousemove 700 300 click 1
+        sleep 0.5
+        xdotool mousemove 560 400 mousedown 1
+        for i in 1 2 3 4 5 6 7 8 9 10 11 12; do xdotool mousemove $((560 + i * 10)) 400; sleep 0.05; done
+        xdotool mouseup 1
+        sleep 1
+        xdotool key ctrl+q
+        wait $pid
+    "#;
+    let Some(out) = xvfb_script(first, dir.path()) else { return };
+    assert!(out.status.success(), "first run failed:\n{}", stderr(&out));
+    let (eye, text) = saved_eye(dir.path());
+    let (default_eye, _) = SceneDoc::default().camera();
+    assert!(eye.x.abs() > 0.2, "dragging orbits the camera sideways: eye {eye} (default {default_eye})");
+    assert!((eye.length() - default_eye.length()).abs() < 0.01, "orbiting keeps the distance: {eye}");
+    assert!(text.contains("compare:true") && text.contains("steep"), "the split view is saved:\n{text}");
+
+    // Second run, no flags: quit at once. The restored session is saved again unchanged (a
+    // viewer that forgot it would save the default camera and no split).
+    let second = r#"
+        "$POMKIT" view &
+        pid=$!
+        win=$(xdotool search --sync --name "pomkit view" | head -1)
+        sleep 3
+        xdotool windowfocus --sync "$win"
+        xdotool mousemove 700 300 click 1
+        sleep 0.5
+        xdotool key ctrl+q
+        wait $pid
+    "#;
+    let Some(out) = xvfb_script(second, dir.path()) else { return };
+    assert!(out.status.success(), "second run failed:\n{}", stderr(&out));
+    let (again, text) = saved_eye(dir.path());
+    assert!((again - eye).length() < 1e-4, "restored camera {again}, saved {eye}");
+    assert!(text.contains("compare:true") && text.contains("steep"), "restored view settings:\n{text}");
+}

@@ -239,19 +239,23 @@ pub fn default_value(key: &str) -> Value {
 
 /// Whether the control of `key` affects the picture for the material as it is set, and if
 /// not, why (shown greyed out with the reason).
-#[must_use]
 pub fn applies(doc: &SceneDoc, key: &str) -> Result<(), &'static str> {
     let get = |k: &str| doc.material_field(k).cloned().unwrap_or_else(|| default_value(k));
     let technique: Technique =
         get("technique").as_str().and_then(|s| s.parse().ok()).unwrap_or(Material::default().technique);
     let shadow: ShadowMode = get("shadow").as_str().and_then(|s| s.parse().ok()).unwrap_or_default();
-    let has_height = doc.material_field("height").is_some();
+    let height = doc.material_field("height").and_then(Value::as_str);
+    let has_height = height.is_some();
+    let builtin_height = height.is_some_and(|h| h.starts_with("builtin:"));
     let has_normal = doc.material_field("normal").is_some();
     let t = technique;
     let tracing_shadow = matches!(shadow, ShadowMode::Hard | ShadowMode::Soft);
     match key {
         "depth_scale" | "depth_map" | "channel" | "normalize" | "lod_threshold" | "shadow" | "edges" if !has_height => {
             Err("needs a height map")
+        }
+        "depth_map" | "channel" | "normalize" if builtin_height => {
+            Err("describes how to read a height image file, not a built-in map")
         }
         "min_samples" | "max_samples" if !(t == Technique::Pom || tracing_shadow) => {
             Err("used by pom and by hard and soft shadows")
@@ -263,7 +267,6 @@ pub fn applies(doc: &SceneDoc, key: &str) -> Result<(), &'static str> {
         "perspective_bias" if t != Technique::PomClassic => Err("used by pom-classic"),
         "softness" if shadow != ShadowMode::Soft => Err("used by soft shadows"),
         "normal_y_down" if !has_normal => Err("needs a normal map file (without one, it is baked from the height)"),
-        "technique" if !has_height => Ok(()),
         _ => Ok(()),
     }
 }
@@ -280,9 +283,10 @@ pub fn param_control(ui: &mut Ui, doc: &mut SceneDoc, p: &Param) -> bool {
     ui.add_enabled_ui(enabled.is_ok(), |ui| match p.kind {
         Kind::Float { min, max, log } => {
             let mut v = current.as_float().or_else(|| current.as_integer().map(|n| n as f64)).unwrap_or(min);
-            ui.label(p.label).on_hover_text(&tooltip).on_disabled_hover_text(&tooltip);
+            let label = ui.label(p.label).on_hover_text(&tooltip).on_disabled_hover_text(&tooltip);
             let r = ui
                 .add(egui::Slider::new(&mut v, min..=max).logarithmic(log).clamping(egui::SliderClamping::Edits))
+                .labelled_by(label.id)
                 .on_hover_text(&tooltip)
                 .on_disabled_hover_text(&tooltip);
             if r.changed() && v.is_finite() {
@@ -291,9 +295,10 @@ pub fn param_control(ui: &mut Ui, doc: &mut SceneDoc, p: &Param) -> bool {
         }
         Kind::Int { min, max } => {
             let mut v = current.as_integer().unwrap_or(min);
-            ui.label(p.label).on_hover_text(&tooltip).on_disabled_hover_text(&tooltip);
+            let label = ui.label(p.label).on_hover_text(&tooltip).on_disabled_hover_text(&tooltip);
             let r = ui
                 .add(egui::Slider::new(&mut v, min..=max).clamping(egui::SliderClamping::Edits))
+                .labelled_by(label.id)
                 .on_hover_text(&tooltip)
                 .on_disabled_hover_text(&tooltip);
             if r.changed() {
@@ -309,17 +314,25 @@ pub fn param_control(ui: &mut Ui, doc: &mut SceneDoc, p: &Param) -> bool {
         }
         Kind::Choice(options) => {
             let selected = current.as_str().unwrap_or("").to_owned();
-            ui.label(p.label).on_hover_text(&tooltip).on_disabled_hover_text(&tooltip);
+            let label = ui.label(p.label).on_hover_text(&tooltip).on_disabled_hover_text(&tooltip);
+            // Without a height map only flat and normal mapping are valid (the loader refuses
+            // a displacing technique there).
+            let no_height = p.key == "technique" && doc.material_field("height").is_none();
             egui::ComboBox::from_id_salt(p.key)
                 .selected_text(&selected)
                 .show_ui(ui, |ui| {
                     for o in options {
-                        if ui.selectable_label(selected == *o, *o).clicked() && selected != *o {
+                        let ok = !no_height || matches!(*o, "flat" | "normal");
+                        let item = ui
+                            .add_enabled(ok, egui::Button::selectable(selected == *o, *o))
+                            .on_disabled_hover_text("needs a height map");
+                        if item.clicked() && selected != *o {
                             changed = Some(Value::String((*o).to_owned()));
                         }
                     }
                 })
                 .response
+                .labelled_by(label.id)
                 .on_hover_text(&tooltip)
                 .on_disabled_hover_text(&tooltip);
         }
