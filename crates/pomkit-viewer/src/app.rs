@@ -179,6 +179,36 @@ impl ViewerApp {
         &self.doc
     }
 
+    /// The view settings.
+    pub fn settings_mut(&mut self) -> &mut Settings {
+        &mut self.settings
+    }
+
+    /// Whether the picture on screen shows the current scene and settings at full resolution
+    /// (nothing left to render).
+    #[must_use]
+    pub fn is_complete(&self) -> bool {
+        self.complete()
+    }
+
+    /// The figures of the picture on screen (one per side of the split).
+    #[must_use]
+    pub fn stats(&self) -> &[SideStats] {
+        &self.stats
+    }
+
+    /// Why the view shows no new picture, if it does not.
+    #[must_use]
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
+    }
+
+    /// The device the view renders on (name, software?), once the render thread has started.
+    #[must_use]
+    pub fn device(&self) -> Option<&Result<(String, bool), String>> {
+        self.device.as_ref()
+    }
+
     fn notify(&mut self, text: impl Into<String>) {
         self.message = Some((text.into(), Instant::now()));
     }
@@ -222,13 +252,37 @@ impl ViewerApp {
         }
     }
 
-    /// Sends a request when the view's size or anything it shows changed.
-    fn request(&mut self, size_px: [u32; 2], preview: bool) {
-        let scale = if preview { 0.5 } else { 1.0 };
-        let w = ((size_px[0] as f32 * scale).round() as u32).clamp(16, 8192);
-        let h = ((size_px[1] as f32 * scale).round() as u32).clamp(16, 8192);
+    /// Sends a request when the view's size or anything it shows changed. While the user
+    /// drags (`interacting`), changes render at half resolution; a press that changes nothing
+    /// keeps the full-resolution picture.
+    fn request(&mut self, size_px: [u32; 2], interacting: bool) {
+        let size = |scale: f32| {
+            let w = ((size_px[0] as f32 * scale).round() as u32).clamp(16, 8192);
+            let h = ((size_px[1] as f32 * scale).round() as u32).clamp(16, 8192);
+            (w, h)
+        };
         let compare =
             if self.settings.compare { self.settings.compare_technique.parse::<Technique>().ok() } else { None };
+        let settings = &self.settings;
+        let same_content = |s: &ViewRequest| {
+            s.doc == self.doc
+                && (s.compare, s.overlay) == (compare, settings.overlay)
+                && (s.overlay_opacity, s.fetch_scale) == (settings.overlay_opacity, settings.fetch_scale)
+        };
+        if let Some((s, was_preview)) = &self.sent
+            && same_content(s)
+            && !self.reload
+        {
+            let sent_size = (s.width, s.height);
+            if !was_preview && sent_size == size(1.0) {
+                return; // the full picture of this is on its way or on screen
+            }
+            if *was_preview && interacting && sent_size == size(0.5) {
+                return;
+            }
+        }
+        let preview = interacting;
+        let (w, h) = size(if preview { 0.5 } else { 1.0 });
         let req = ViewRequest {
             id: self.next_id,
             doc: self.doc.clone(),
@@ -241,16 +295,6 @@ impl ViewerApp {
             fetch_scale: self.settings.fetch_scale,
             reload: self.reload,
         };
-        let same = self.sent.as_ref().is_some_and(|(s, p)| {
-            *p == preview
-                && s.doc == req.doc
-                && (s.width, s.height, s.compare, s.overlay) == (w, h, compare, req.overlay)
-                && (s.overlay_opacity, s.fetch_scale) == (req.overlay_opacity, req.fetch_scale)
-                && !req.reload
-        });
-        if same {
-            return;
-        }
         self.next_id += 1;
         self.reload = false;
         self.worker.request(req.clone());
@@ -390,14 +434,19 @@ impl ViewerApp {
                 Path::new(&mesh).file_name().map_or(mesh.clone(), |n| n.to_string_lossy().into_owned())
             };
             ui.horizontal(|ui| {
-                ui.label("Mesh").on_hover_text("The selected object's mesh: a built-in shape or an OBJ/glTF file.");
-                egui::ComboBox::from_id_salt("mesh").selected_text(shown).show_ui(ui, |ui| {
-                    for (shape, _) in SHAPES {
-                        if ui.selectable_label(mesh == shape, shape).clicked() && mesh != shape {
-                            self.doc.set_mesh(shape);
+                let label =
+                    ui.label("Mesh").on_hover_text("The selected object's mesh: a built-in shape or an OBJ/glTF file.");
+                egui::ComboBox::from_id_salt("mesh")
+                    .selected_text(shown)
+                    .show_ui(ui, |ui| {
+                        for (shape, _) in SHAPES {
+                            if ui.selectable_label(mesh == shape, shape).clicked() && mesh != shape {
+                                self.doc.set_mesh(shape);
+                            }
                         }
-                    }
-                });
+                    })
+                    .response
+                    .labelled_by(label.id);
                 if ui.button("File...").on_hover_text("Load an OBJ, glTF or GLB mesh.").clicked() {
                     self.browser = Some(Browser::new(Purpose::Mesh));
                 }
@@ -411,8 +460,9 @@ impl ViewerApp {
                         .or_else(|| v.as_array()?.first()?.as_float())
                 })
                 .unwrap_or(1.0);
-            ui.label("UV repeat").on_hover_text("How many times the maps tile across the object (uv_repeat).");
-            if ui.add(egui::Slider::new(&mut repeat, 0.25..=16.0).logarithmic(true)).changed() {
+            let label =
+                ui.label("UV repeat").on_hover_text("How many times the maps tile across the object (uv_repeat).");
+            if ui.add(egui::Slider::new(&mut repeat, 0.25..=16.0).logarithmic(true)).labelled_by(label.id).changed() {
                 self.doc.set_object_field("uv_repeat", Some(Value::Float((repeat * 1e4).round() / 1e4)));
             }
         });
@@ -442,8 +492,9 @@ impl ViewerApp {
                                  the depth scale.",
                             ),
                         };
+                        let mut title_id = ui.scope_id();
                         ui.horizontal(|ui| {
-                            ui.strong(title).on_hover_text(doc);
+                            title_id = ui.strong(title).on_hover_text(doc).id;
                             let name = match &current {
                                 Some(c) if c.starts_with("builtin:") => c.clone(),
                                 Some(c) => {
@@ -468,7 +519,10 @@ impl ViewerApp {
                                                 self.doc.set_map(slot, Some(format!("builtin:{}", p.name())));
                                             }
                                         }
-                                    });
+                                    })
+                                    .response
+                                    .labelled_by(title_id)
+                                    .on_hover_text("A built-in procedural pattern (builtin:NAME in a scene file).");
                             }
                             if current.is_some() && ui.button("Remove").clicked() {
                                 self.doc.set_map(slot, None);
@@ -612,7 +666,7 @@ impl ViewerApp {
             let (eye, target) = SceneDoc::default().camera();
             self.doc.set_camera(eye, target);
         }
-        let interacting = interacting || ui.ctx().egui_is_using_pointer();
+        let interacting = interacting || ui.ctx().dragged_id().is_some();
         self.request(size_px, interacting);
 
         // The picture.

@@ -1,0 +1,234 @@
+//! The whole viewer app in egui_kittest (no window): it renders on the GPU renderer's thread
+//! and says which device; dragging in the view orbits the camera and ctrl-dragging moves the
+//! light; dropped files land in the right slot; the split view renders both sides; Export
+//! writes a PNG and a scene that loads back to the same document.
+//!
+//! Runs on any wgpu adapter, Mesa's lavapipe included; without one it prints "skipping" and
+//! passes, unless `POMKIT_REQUIRE_GPU=1`.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use eframe::egui::{self, Pos2};
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use pomkit_core::glam::Vec3;
+use pomkit_viewer::ViewerApp;
+use pomkit_viewer::doc::SceneDoc;
+
+fn gpu_available() -> bool {
+    match pomkit_gpu::GpuContext::new() {
+        Ok(_) => true,
+        Err(e) => {
+            pomkit_gpu::context::skip_without_gpu(&e);
+            false
+        }
+    }
+}
+
+/// The app in a 1100x700 harness, on `doc` (or the default scene).
+fn harness(doc: Option<SceneDoc>) -> Harness<'static, ViewerApp> {
+    harness_sized(doc, 700.0)
+}
+
+/// The app in a harness `height` points tall (tall enough, the whole panel is on screen).
+fn harness_sized(doc: Option<SceneDoc>, height: f32) -> Harness<'static, ViewerApp> {
+    let ctx = egui::Context::default();
+    let app = ViewerApp::new(&eframe::CreationContext::_new_kittest(ctx), doc, None);
+    Harness::builder().with_size((1100.0, height)).with_max_steps(1_000_000).build_ui_state(
+        |ui, app: &mut ViewerApp| {
+            let mut frame = eframe::Frame::_new_kittest();
+            eframe::App::ui(app, ui, &mut frame);
+        },
+        app,
+    )
+}
+
+/// Steps the UI (in real time, as the render thread works) until the view is complete.
+fn settle(h: &mut Harness<'static, ViewerApp>) {
+    let start = Instant::now();
+    loop {
+        h.step();
+        if h.state().is_complete() {
+            // One more frame so that the picture is on screen.
+            h.step();
+            return;
+        }
+        assert!(start.elapsed() < Duration::from_secs(180), "the view did not complete in 180 s");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// A point inside the 3D view (right of the side panel, left of a centred split).
+fn in_view() -> Pos2 {
+    Pos2::new(560.0, 350.0)
+}
+
+fn drag(h: &mut Harness<'static, ViewerApp>, from: Pos2, by: egui::Vec2, modifiers: egui::Modifiers) {
+    let press = |pressed: bool, pos: Pos2| egui::Event::PointerButton {
+        pos,
+        button: egui::PointerButton::Primary,
+        pressed,
+        modifiers,
+    };
+    h.event(egui::Event::ModifiersChanged(modifiers));
+    h.event(egui::Event::PointerMoved(from));
+    h.step();
+    h.event(press(true, from));
+    h.step();
+    for i in 1..=8 {
+        h.event(egui::Event::PointerMoved(from + by * (i as f32 / 8.0)));
+        h.step();
+    }
+    h.event(press(false, from + by));
+    h.step();
+    h.event(egui::Event::ModifiersChanged(egui::Modifiers::NONE));
+    h.step();
+}
+
+#[derive(Debug)]
+struct Dropped(PathBuf);
+
+impl egui::DroppedFile for Dropped {
+    fn path(&self) -> &Path {
+        &self.0
+    }
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+#[test]
+fn renders_on_the_gpu_thread_and_names_the_device() {
+    if !gpu_available() {
+        return;
+    }
+    let mut h = harness(None);
+    settle(&mut h);
+    assert_eq!(h.state().error(), None);
+    let stats = h.state().stats().to_vec();
+    assert_eq!(stats.len(), 1);
+    assert_eq!(stats[0].label, "pom");
+    assert!(stats[0].covered > 10_000, "the plane covers the view: {stats:?}");
+    assert!(stats[0].fetches_per_pixel > 4.0, "pom with soft shadows fetches: {stats:?}");
+    assert!(stats[0].frame_ms > 0.0);
+    let Some(Ok((name, software))) = h.state().device().cloned() else { panic!("a device") };
+    assert!(h.query_by_label_contains(&format!("GPU: {name}")).is_some(), "the panel names the adapter");
+    assert_eq!(
+        h.query_by_label_contains("lavapipe").is_some(),
+        software,
+        "the window says so exactly when it renders in software"
+    );
+}
+
+#[test]
+fn dragging_orbits_the_camera_and_ctrl_dragging_moves_the_light() {
+    if !gpu_available() {
+        return;
+    }
+    let mut h = harness(None);
+    settle(&mut h);
+    let (eye0, target0) = h.state().doc().camera();
+    drag(&mut h, in_view(), egui::vec2(120.0, 0.0), egui::Modifiers::NONE);
+    let (eye1, target1) = h.state().doc().camera();
+    assert_eq!(target1, target0, "orbiting keeps the target");
+    assert!((eye1 - target1).length() - (eye0 - target0).length() < 1e-3, "and the distance");
+    assert!(eye1.x < -0.3, "dragging right swings the eye to -x: {eye0} -> {eye1}");
+
+    let light0 = h.state().doc().light_direction().expect("the default scene's sun");
+    drag(&mut h, in_view(), egui::vec2(0.0, 60.0), egui::Modifiers::CTRL);
+    let light1 = h.state().doc().light_direction().expect("still there");
+    assert_eq!(h.state().doc().camera().0, eye1, "ctrl-drag leaves the camera alone");
+    assert!(light1.y < light0.normalize().y - 0.1, "dragging down lowers the sun: {light0} -> {light1}");
+    settle(&mut h);
+    assert_eq!(h.state().error(), None);
+}
+
+#[test]
+fn dropped_files_go_to_their_slots_and_render() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // A 32x32 height map of raised squares, named like a height map.
+    let h32: Vec<u8> = (0..32 * 32).map(|i| if (i % 32) / 8 % 2 == (i / 32) / 8 % 2 { 230 } else { 40 }).collect();
+    let height = dir.path().join("tiles_height.png");
+    pomkit_io::write_image(&height, 32, 32, pomkit_io::PixelLayout::Gray8, pomkit_io::Pixels::U8(&h32)).unwrap();
+    let albedo = dir.path().join("tiles_basecolor.png");
+    let rgb: Vec<u8> = (0..32 * 32).flat_map(|_| [200u8, 120, 60]).collect();
+    pomkit_io::write_image(&albedo, 32, 32, pomkit_io::PixelLayout::Rgb8, pomkit_io::Pixels::U8(&rgb)).unwrap();
+
+    let mut h = harness(None);
+    settle(&mut h);
+    // Dropped over the 3D view (not over a slot): sorted by name.
+    h.event(egui::Event::PointerMoved(in_view()));
+    h.input_mut().dropped_files = vec![Arc::new(Dropped(height.clone())), Arc::new(Dropped(albedo.clone()))];
+    h.step();
+    let field = |h: &Harness<'static, ViewerApp>, k: &str| {
+        h.state().doc().material_field(k).and_then(|v| v.as_str()).map(str::to_owned)
+    };
+    assert_eq!(field(&h, "height").as_deref(), height.to_str());
+    assert_eq!(field(&h, "albedo").as_deref(), albedo.to_str());
+    settle(&mut h);
+    assert_eq!(h.state().error(), None, "the dropped maps load and render");
+
+    // An image dropped onto the normal slot goes there whatever its name.
+    let normal = dir.path().join("tiles_basecolor_copy.png");
+    let flat_normal: Vec<u8> = (0..32 * 32).flat_map(|_| [128u8, 128, 255]).collect();
+    pomkit_io::write_image(&normal, 32, 32, pomkit_io::PixelLayout::Rgb8, pomkit_io::Pixels::U8(&flat_normal)).unwrap();
+    let slot = h.get_by_label_contains("baked from height").rect().center();
+    h.event(egui::Event::PointerMoved(slot));
+    h.input_mut().dropped_files = vec![Arc::new(Dropped(normal.clone()))];
+    h.step();
+    assert_eq!(field(&h, "normal").as_deref(), normal.to_str());
+
+    // A scene file replaces the document.
+    let scene = dir.path().join("other.toml");
+    let mut doc = SceneDoc::default();
+    doc.set_mesh("torus");
+    std::fs::write(&scene, doc.to_toml()).unwrap();
+    h.input_mut().dropped_files = vec![Arc::new(Dropped(scene))];
+    h.step();
+    assert_eq!(h.state().doc().mesh(), "torus");
+    settle(&mut h);
+    assert_eq!(h.state().error(), None);
+}
+
+#[test]
+fn split_view_renders_both_techniques_and_export_writes_png_and_scene() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // Tall enough for the whole side panel (Split view and Export are near its end).
+    let mut h = harness_sized(None, 1800.0);
+    settle(&mut h);
+    h.get_by_label("Split view").click();
+    h.step();
+    settle(&mut h);
+    let stats = h.state().stats().to_vec();
+    assert_eq!(stats.iter().map(|s| s.label.as_str()).collect::<Vec<_>>(), ["pom", "relief"]);
+    assert_ne!(stats[0].fetches_per_pixel, stats[1].fetches_per_pixel, "two different traces: {stats:?}");
+
+    let png = dir.path().join("view.png");
+    h.state_mut().settings_mut().export_path = png.to_string_lossy().into_owned();
+    h.step();
+    let button = h.get_by_role_and_label(egui::accesskit::Role::Button, "Export");
+    assert!(button.rect().bottom() < 1800.0, "the Export button is on screen: {:?}", button.rect());
+    button.click();
+    h.step();
+    h.step();
+    if let Some(msg) = h.query_by_label_contains("Export failed") {
+        panic!("{msg:?}");
+    }
+    let img = image::open(&png).expect("the PNG was written").to_rgb8();
+    assert!(img.width() > 300 && img.height() > 300, "the view's size: {:?}", img.dimensions());
+    let text = std::fs::read_to_string(dir.path().join("view.toml")).expect("the scene was written");
+    assert!(text.contains("split view"), "the note says the PNG is a split view:\n{text}");
+    let back = SceneDoc::from_text(&text, Path::new("/")).expect("the exported scene parses");
+    assert_eq!(&back, h.state().doc(), "the exported scene is the document");
+    let (eye, _) = back.camera();
+    assert_eq!(eye, h.state().doc().camera().0);
+    assert_ne!(eye, Vec3::ZERO);
+}
