@@ -10,9 +10,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use pomkit_core::glam::Vec3;
-use pomkit_io::scene::SceneCache;
 use pomkit_viewer::doc::SceneDoc;
-use pomkit_viewer::view::{Overlay, ViewRequest, export, render_view};
+use pomkit_viewer::view::{Overlay, ViewRenderer, ViewRequest, export};
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
@@ -136,7 +135,7 @@ fn exported_scene_renders_the_viewers_picture() {
 
     // What the viewer's render thread draws for this session.
     let ctx = pomkit_gpu::GpuContext::new().expect("adapter");
-    let mut renderer = pomkit_gpu::GpuRenderer::new(ctx);
+    let mut renderer = ViewRenderer::new(ctx);
     let req = ViewRequest {
         id: 1,
         doc: doc.clone(),
@@ -149,7 +148,7 @@ fn exported_scene_renders_the_viewers_picture() {
         fetch_scale: 48.0,
         reload: false,
     };
-    let result = render_view(&mut renderer, &mut SceneCache::default(), &req);
+    let result = renderer.render(&req);
     let images = result.images.expect("the view renders");
     let dir = tempfile::tempdir().unwrap();
     let png = dir.path().join("session.png");
@@ -190,7 +189,7 @@ fn exported_scene_renders_the_viewers_picture() {
     // And the export is not trivially equal to any render: a different technique differs.
     let mut other = doc.clone();
     other.set_material_field("technique", Some(toml::Value::String("flat".into())));
-    let flat = render_view(&mut renderer, &mut SceneCache::default(), &ViewRequest { doc: other, ..req });
+    let flat = renderer.render(&ViewRequest { doc: other, ..req });
     let flat = flat.images.expect("renders");
     let differing = flat[0].rgba.chunks(4).zip(images[0].rgba.chunks(4)).filter(|(a, b)| a[..3] != b[..3]).count();
     assert!(differing > (w * h / 20) as usize, "flat and relief should differ ({differing} pixels)");

@@ -373,6 +373,18 @@ impl GpuScene {
         Ok(())
     }
 
+    /// Moves the camera and changes the lights (and ambient light, and the LOD tint view) of a
+    /// prepared scene without uploading anything else: the retained form for a moving camera or
+    /// light. The next [`GpuRenderer::draw`] uses them. `scene` must be the scene this one was
+    /// prepared from, with only its camera, lights or ambient light changed.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] for more than 4 lights.
+    pub fn set_view(&self, ctx: &GpuContext, scene: &Scene, lod_tint: bool) -> Result<(), GpuError> {
+        let aspect = (self.width * self.ss) as f32 / (self.height * self.ss) as f32;
+        self.frame.write(ctx, &scene.camera, aspect, &scene.lights, scene.ambient, lod_tint)
+    }
+
     /// The uploaded materials, in scene order.
     #[must_use]
     pub fn materials(&self) -> &[GpuMaterial] {

@@ -155,6 +155,17 @@ impl SceneDoc {
         toml::to_string(&self.table).unwrap_or_default()
     }
 
+    /// The scene file without its camera and lights: equal for two documents that differ only
+    /// in where they are seen from and lit from.
+    #[must_use]
+    pub fn structure_key(&self) -> String {
+        let mut t = self.table.clone();
+        t.remove("camera");
+        t.remove("light");
+        t.remove("ambient");
+        toml::to_string(&t).unwrap_or_default()
+    }
+
     /// Builds the scene, loading textures and meshes through `cache`.
     ///
     /// # Errors

@@ -9,7 +9,7 @@ use std::thread::JoinHandle;
 use pomkit_core::render::{Mode, RenderOptions, RenderOutput};
 use pomkit_core::scene::Scene;
 use pomkit_core::trace::Technique;
-use pomkit_gpu::{GpuContext, GpuRenderer};
+use pomkit_gpu::{GpuContext, GpuRenderer, GpuScene};
 use pomkit_io::scene::SceneCache;
 use serde::{Deserialize, Serialize};
 
@@ -185,7 +185,7 @@ impl Worker {
                 let mut renderer = match GpuContext::new() {
                     Ok(ctx) => {
                         let _ = res_tx.send(WorkerMessage::Device(Ok((ctx.describe(), ctx.is_software()))));
-                        Some(GpuRenderer::new(ctx))
+                        Some(ViewRenderer::new(ctx))
                     }
                     Err(e) => {
                         let _ = res_tx.send(WorkerMessage::Device(Err(e.to_string())));
@@ -193,7 +193,6 @@ impl Worker {
                     }
                 };
                 wake();
-                let mut cache = SceneCache::default();
                 while let Ok(mut req) = req_rx.recv() {
                     // Only the newest request matters.
                     loop {
@@ -208,7 +207,7 @@ impl Worker {
                         }
                     }
                     let result = match renderer.as_mut() {
-                        Some(r) => render_view(r, &mut cache, &req),
+                        Some(r) => r.render(&req),
                         None => ViewResult { id: req.id, images: Err("no GPU adapter".into()), stats: Vec::new() },
                     };
                     if res_tx.send(WorkerMessage::Frame(result)).is_err() {
@@ -249,49 +248,114 @@ impl Drop for Worker {
     }
 }
 
-/// Renders one request on `renderer` (blocking).
-pub fn render_view(renderer: &mut GpuRenderer, cache: &mut SceneCache, req: &ViewRequest) -> ViewResult {
-    if req.reload {
-        cache.clear();
+/// Renders view requests: the GPU renderer, the loaded maps, and the scenes prepared on the GPU
+/// for the last request, kept while only the camera or the lights change (an orbit or a light
+/// drag then uploads nothing and reruns no height pass).
+pub struct ViewRenderer {
+    renderer: GpuRenderer,
+    cache: SceneCache,
+    /// What the prepared scenes were prepared from, and one prepared scene per side.
+    prepared: Option<(PreparedKey, Vec<GpuScene>)>,
+    reused: bool,
+}
+
+/// Everything a prepared scene depends on except the camera and the lights.
+#[derive(Clone, Debug, PartialEq)]
+struct PreparedKey {
+    structure: String,
+    width: u32,
+    height: u32,
+    modes: Vec<Mode>,
+    lod_tint: bool,
+}
+
+impl ViewRenderer {
+    /// A renderer on `ctx`'s device.
+    #[must_use]
+    pub fn new(ctx: GpuContext) -> Self {
+        Self { renderer: GpuRenderer::new(ctx), cache: SceneCache::default(), prepared: None, reused: false }
     }
-    let fail = |msg: String| ViewResult { id: req.id, images: Err(msg), stats: Vec::new() };
-    let scene = match req.doc.build(cache) {
-        Ok(s) => s,
-        Err(e) => return fail(e.to_string()),
-    };
-    let opts = RenderOptions {
-        width: req.width.max(1),
-        height: req.height.max(1),
-        supersample: 1,
-        mode: Mode::Material,
-        aovs: true,
-        displaced_edge_texels: 1.0,
-        lod_tint: req.overlay == Overlay::LodTint,
-    };
-    let mut sides = vec![(Mode::Material, "material".to_owned())];
-    if let Some(t) = req.compare {
-        sides.push((Mode::Technique(t), t.name().to_owned()));
+
+    /// Whether the last [`ViewRenderer::render`] reused the prepared scenes (only the camera
+    /// or lights had changed).
+    #[must_use]
+    pub fn reused(&self) -> bool {
+        self.reused
     }
-    let mut outputs = Vec::new();
-    let mut stats = Vec::new();
-    for (mode, label) in sides {
-        let out = match renderer.render(&scene, &RenderOptions { mode, ..opts }) {
-            Ok(o) => o,
-            Err(e) => return fail(format!("the GPU renderer failed: {e}")),
+
+    /// Renders one request (blocking).
+    pub fn render(&mut self, req: &ViewRequest) -> ViewResult {
+        if req.reload {
+            self.cache.clear();
+            self.prepared = None;
+        }
+        let fail = |msg: String| ViewResult { id: req.id, images: Err(msg), stats: Vec::new() };
+        let scene = match req.doc.build(&mut self.cache) {
+            Ok(s) => s,
+            Err(e) => return fail(e.to_string()),
         };
-        let t = renderer.timings();
-        stats.push(side_stats(&scene, &out, label, t.render_pass_ms, t.from_timestamps));
-        outputs.push(out);
+        let opts = RenderOptions {
+            width: req.width.max(1),
+            height: req.height.max(1),
+            supersample: 1,
+            mode: Mode::Material,
+            aovs: true,
+            displaced_edge_texels: 1.0,
+            lod_tint: req.overlay == Overlay::LodTint,
+        };
+        let mut sides = vec![(Mode::Material, "material".to_owned())];
+        if let Some(t) = req.compare {
+            sides.push((Mode::Technique(t), t.name().to_owned()));
+        }
+        let key = PreparedKey {
+            structure: req.doc.structure_key(),
+            width: opts.width,
+            height: opts.height,
+            modes: sides.iter().map(|(m, _)| *m).collect(),
+            lod_tint: opts.lod_tint,
+        };
+        let ctx = self.renderer.context().clone();
+        let reuse = self.prepared.as_ref().is_some_and(|(k, _)| *k == key);
+        self.reused = reuse;
+        if reuse {
+            for gs in self.prepared.iter().flat_map(|(_, g)| g) {
+                if let Err(e) = gs.set_view(&ctx, &scene, opts.lod_tint) {
+                    return fail(format!("the GPU renderer failed: {e}"));
+                }
+            }
+        } else {
+            self.prepared = None;
+            let mut prepared = Vec::new();
+            for (mode, _) in &sides {
+                match self.renderer.prepare(&scene, &RenderOptions { mode: *mode, ..opts }) {
+                    Ok(gs) => prepared.push(gs),
+                    Err(e) => return fail(format!("the GPU renderer failed: {e}")),
+                }
+            }
+            self.prepared = Some((key, prepared));
+        }
+        let mut outputs = Vec::new();
+        let mut stats = Vec::new();
+        let Some((_, prepared)) = self.prepared.as_mut() else { return fail("nothing prepared".into()) };
+        for ((_, label), gs) in sides.into_iter().zip(prepared.iter_mut()) {
+            let out = match self.renderer.draw(gs, &scene) {
+                Ok(o) => o,
+                Err(e) => return fail(format!("the GPU renderer failed: {e}")),
+            };
+            let t = self.renderer.timings();
+            stats.push(side_stats(&scene, &out, label, t.render_pass_ms, t.from_timestamps));
+            outputs.push(out);
+        }
+        let images = outputs
+            .iter()
+            .map(|o| ViewImage {
+                width: o.width,
+                height: o.height,
+                rgba: overlaid(o, req.overlay, req.overlay_opacity, req.fetch_scale),
+            })
+            .collect();
+        ViewResult { id: req.id, images: Ok(images), stats }
     }
-    let images = outputs
-        .iter()
-        .map(|o| ViewImage {
-            width: o.width,
-            height: o.height,
-            rgba: overlaid(o, req.overlay, req.overlay_opacity, req.fetch_scale),
-        })
-        .collect();
-    ViewResult { id: req.id, images: Ok(images), stats }
 }
 
 fn side_stats(scene: &Scene, out: &RenderOutput, label: String, frame_ms: f64, from_timestamps: bool) -> SideStats {
@@ -311,23 +375,25 @@ fn side_stats(scene: &Scene, out: &RenderOutput, label: String, frame_ms: f64, f
     SideStats { label, frame_ms, from_timestamps, fetches_per_pixel, max_fetches: max, covered: out.covered }
 }
 
-/// A render as sRGB RGBA8 with the overlay blended over it at `opacity`.
+/// A render as sRGB RGBA8 (the tone curve and encoding of [`RenderOutput::to_srgb8`]) with the
+/// overlay blended over it at `opacity`. In parallel: it runs on every frame.
 #[must_use]
 pub fn overlaid(out: &RenderOutput, overlay: Overlay, opacity: f32, fetch_scale: f32) -> Vec<u8> {
+    use rayon::prelude::*;
     let opacity = opacity.clamp(0.0, 1.0);
-    out.to_srgb8()
-        .into_iter()
-        .enumerate()
-        .flat_map(|(i, base)| {
-            let px = match overlay_color(out, i, overlay, fetch_scale) {
-                Some(c) => std::array::from_fn(|k| {
-                    (f32::from(base[k]) * (1.0 - opacity) + f32::from(c[k]) * opacity).round() as u8
-                }),
-                None => base,
-            };
-            [px[0], px[1], px[2], 255]
-        })
-        .collect()
+    let mut rgba = vec![0u8; out.color.len() * 4];
+    rgba.par_chunks_mut(4).enumerate().for_each(|(i, px)| {
+        let t = pomkit_core::render::tone(out.color[i]);
+        let base = [t.x, t.y, t.z].map(|v| (pomkit_core::scene::linear_to_srgb(v) * 255.0 + 0.5) as u8);
+        let c = match overlay_color(out, i, overlay, fetch_scale) {
+            Some(c) => std::array::from_fn(|k| {
+                (f32::from(base[k]) * (1.0 - opacity) + f32::from(c[k]) * opacity).round() as u8
+            }),
+            None => base,
+        };
+        px.copy_from_slice(&[c[0], c[1], c[2], 255]);
+    });
+    rgba
 }
 
 /// The split view as one picture: columns left of `split` (a share of the width) from
@@ -461,6 +527,13 @@ mod tests {
         assert_eq!(half[0], 32); // 0.25 * 255 = 63.75 -> 64, half of it over black
         let none = overlaid(&a, Overlay::None, 1.0, 32.0);
         assert_eq!(&none[0..4], &[0, 0, 0, 255]);
+        // Without an overlay, exactly the renderers' own sRGB encoding.
+        let mut ramp = output(Vec3::ZERO, 0.0);
+        ramp.color = (0..8).map(|i| Vec3::new(i as f32 * 0.3, i as f32 * 0.1, 2.0 - i as f32 * 0.25)).collect();
+        let ours: Vec<u8> =
+            overlaid(&ramp, Overlay::None, 0.0, 1.0).chunks(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+        let theirs: Vec<u8> = ramp.to_srgb8().into_iter().flatten().collect();
+        assert_eq!(ours, theirs);
     }
 
     #[test]

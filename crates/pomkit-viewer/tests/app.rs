@@ -232,3 +232,45 @@ fn split_view_renders_both_techniques_and_export_writes_png_and_scene() {
     assert_eq!(eye, h.state().doc().camera().0);
     assert_ne!(eye, Vec3::ZERO);
 }
+
+#[test]
+fn a_moved_camera_or_light_reuses_the_prepared_scene_and_draws_the_same_picture() {
+    if !gpu_available() {
+        return;
+    }
+    use pomkit_viewer::view::{Overlay, ViewRenderer, ViewRequest};
+    let request = |doc: SceneDoc, compare| ViewRequest {
+        id: 1,
+        doc,
+        width: 240,
+        height: 160,
+        compare,
+        split: 0.5,
+        overlay: Overlay::Fetches,
+        overlay_opacity: 0.5,
+        fetch_scale: 40.0,
+        reload: false,
+    };
+    let ctx = pomkit_gpu::GpuContext::new().expect("adapter");
+    let mut retained = ViewRenderer::new(ctx.clone());
+    let first = SceneDoc::default();
+    let mut moved = first.clone();
+    moved.set_camera(Vec3::new(1.2, 0.9, 1.4), Vec3::new(0.1, 0.0, 0.0));
+    moved.set_light_direction(Vec3::new(0.3, 0.4, 0.8));
+    let compare = Some(pomkit_core::trace::Technique::Relief);
+    let a = retained.render(&request(first.clone(), compare)).images.expect("renders");
+    assert!(!retained.reused());
+    let b = retained.render(&request(moved.clone(), compare)).images.expect("renders");
+    assert!(retained.reused(), "only the camera and light changed");
+    let fresh = ViewRenderer::new(ctx).render(&request(moved.clone(), compare)).images.expect("renders");
+    for (side, (b, f)) in b.iter().zip(&fresh).enumerate() {
+        assert!(b.rgba == f.rgba, "side {side}: the retained frame equals a fresh render of the moved view");
+    }
+    assert!(a[0].rgba != b[0].rgba, "and the view did move");
+
+    // Anything else (here the depth scale) prepares again.
+    let mut deeper = moved;
+    deeper.set_material_field("depth_scale", Some(toml::Value::Float(0.1)));
+    retained.render(&request(deeper, compare)).images.expect("renders");
+    assert!(!retained.reused());
+}
