@@ -354,6 +354,12 @@ impl ViewerApp {
             egui::CollapsingHeader::new("Shadows, LOD, input, shading").default_open(true).show(ui, |ui| {
                 for p in &OTHER_PARAMS {
                     panel::param_control(ui, &mut self.doc, p);
+                    if p.key == "lod_threshold" {
+                        let mut tint = self.settings.overlay == Overlay::LodTint;
+                        if ui.checkbox(&mut tint, "LOD tint view").on_hover_text(Overlay::LodTint.doc()).changed() {
+                            self.settings.overlay = if tint { Overlay::LodTint } else { Overlay::None };
+                        }
+                    }
                 }
                 panel::base_color_control(ui, &mut self.doc);
             });
@@ -594,7 +600,12 @@ impl ViewerApp {
 
     fn export(&mut self) {
         let Some(image) = split_view(&self.images, self.settings.split) else { return };
-        let path = PathBuf::from(self.settings.export_path.trim());
+        let name = self.settings.export_path.trim();
+        if name.is_empty() {
+            self.notify("Export: type the PNG's file name first.");
+            return;
+        }
+        let path = PathBuf::from(name);
         let mut notes = Vec::new();
         if self.settings.compare && self.images.len() > 1 {
             notes.push(format!(

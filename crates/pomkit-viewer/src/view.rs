@@ -227,9 +227,28 @@ impl Worker {
         }
     }
 
-    /// The messages that arrived since the last call.
+    /// The messages that arrived since the last call. If the render thread has stopped (a
+    /// device lost, a panic in the driver), a frame saying so.
     pub fn poll(&self) -> Vec<WorkerMessage> {
-        self.results.try_iter().collect()
+        let mut out = Vec::new();
+        loop {
+            match self.results.try_recv() {
+                Ok(m) => out.push(m),
+                Err(TryRecvError::Empty) => return out,
+                Err(TryRecvError::Disconnected) => {
+                    if self.thread.as_ref().is_some_and(JoinHandle::is_finished) {
+                        out.push(WorkerMessage::Frame(ViewResult {
+                            id: u64::MAX,
+                            images: Err(
+                                "the render thread stopped (see the terminal for why); restart the viewer".into()
+                            ),
+                            stats: Vec::new(),
+                        }));
+                    }
+                    return out;
+                }
+            }
+        }
     }
 
     /// Waits for the next message (tests and headless use).
