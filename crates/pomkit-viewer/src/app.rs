@@ -734,12 +734,6 @@ impl ViewerApp {
         if !status.is_empty() {
             shadowed(rect.right_bottom() + Vec2::new(-8.0, -8.0), egui::Align2::RIGHT_BOTTOM, status);
         }
-        shadowed(
-            rect.left_bottom() + Vec2::new(8.0, -8.0),
-            egui::Align2::LEFT_BOTTOM,
-            "drag: orbit  shift/right-drag: pan  wheel: zoom  ctrl-drag: light  double-click: reset  ctrl+q: quit"
-                .into(),
-        );
         if let Some(e) = &self.error {
             painter.text(
                 rect.center(),
@@ -895,13 +889,24 @@ impl eframe::App for ViewerApp {
             self.side_panel(ui);
         });
         egui::Panel::bottom("status").show(ui, |ui| {
-            ui.horizontal(|ui| match &self.message {
-                Some((m, at)) if at.elapsed() < Duration::from_secs(8) => {
-                    ui.label(m.as_str());
+            ui.horizontal(|ui| {
+                match &self.message {
+                    Some((m, at)) if at.elapsed() < Duration::from_secs(8) => {
+                        ui.label(m.as_str());
+                    }
+                    _ => {
+                        ui.label(RichText::new("Drop textures, meshes or scenes on the window.").weak());
+                    }
                 }
-                _ => {
-                    ui.label(RichText::new("Drop textures, meshes or scenes on the window.").weak());
-                }
+                ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
+                    ui.label(
+                        RichText::new(
+                            "drag: orbit   shift/right-drag: pan   wheel: zoom   ctrl-drag: light   \
+                             double-click: reset   ctrl+Q: quit",
+                        )
+                        .weak(),
+                    );
+                });
             });
         });
         egui::CentralPanel::default().frame(egui::Frame::NONE).show(ui, |ui| self.view(ui));
