@@ -11,7 +11,7 @@ use std::process::{Command, Output};
 
 use pomkit_core::glam::Vec3;
 use pomkit_viewer::doc::SceneDoc;
-use pomkit_viewer::view::{Overlay, ViewRenderer, ViewRequest, export};
+use pomkit_viewer::view::{ViewRenderer, ViewRequest, export};
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
@@ -136,18 +136,7 @@ fn exported_scene_renders_the_viewers_picture() {
     // What the viewer's render thread draws for this session.
     let ctx = pomkit_gpu::GpuContext::new().expect("adapter");
     let mut renderer = ViewRenderer::new(ctx);
-    let req = ViewRequest {
-        id: 1,
-        doc: doc.clone(),
-        width: w,
-        height: h,
-        compare: None,
-        split: 0.5,
-        overlay: Overlay::None,
-        overlay_opacity: 1.0,
-        fetch_scale: 48.0,
-        reload: false,
-    };
+    let req = ViewRequest::new(doc.clone(), w, h);
     let result = renderer.render(&req);
     let images = result.images.expect("the view renders");
     let dir = tempfile::tempdir().unwrap();

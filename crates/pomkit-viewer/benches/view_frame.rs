@@ -7,22 +7,11 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use pomkit_core::glam::Vec3;
 use pomkit_viewer::doc::SceneDoc;
-use pomkit_viewer::view::{Overlay, ViewRenderer, ViewRequest};
+use pomkit_viewer::view::{ViewRenderer, ViewRequest};
 use std::hint::black_box;
 
 fn request(doc: SceneDoc) -> ViewRequest {
-    ViewRequest {
-        id: 1,
-        doc,
-        width: 950,
-        height: 738,
-        compare: None,
-        split: 0.5,
-        overlay: Overlay::None,
-        overlay_opacity: 1.0,
-        fetch_scale: 48.0,
-        reload: false,
-    }
+    ViewRequest::new(doc, 950, 738)
 }
 
 fn bench_view(c: &mut Criterion) {

@@ -407,32 +407,8 @@ impl ViewerApp {
                     self.sent = None;
                 }
             });
-            let materials = self.doc.material_names();
-            if materials.len() > 1 {
-                let mut m = self.doc.material;
-                egui::ComboBox::from_label("Material").selected_text(&materials[m.min(materials.len() - 1)]).show_ui(
-                    ui,
-                    |ui| {
-                        for (i, n) in materials.iter().enumerate() {
-                            ui.selectable_value(&mut m, i, n);
-                        }
-                    },
-                );
-                self.doc.material = m;
-            }
-            let objects = self.doc.object_names();
-            if objects.len() > 1 {
-                let mut o = self.doc.object;
-                egui::ComboBox::from_label("Object").selected_text(&objects[o.min(objects.len() - 1)]).show_ui(
-                    ui,
-                    |ui| {
-                        for (i, n) in objects.iter().enumerate() {
-                            ui.selectable_value(&mut o, i, n);
-                        }
-                    },
-                );
-                self.doc.object = o;
-            }
+            pick(ui, "Material", &self.doc.material_names(), &mut self.doc.material);
+            pick(ui, "Object", &self.doc.object_names(), &mut self.doc.object);
             let mesh = self.doc.mesh();
             let shown = if SHAPES.iter().any(|(s, _)| *s == mesh) {
                 mesh.clone()
@@ -847,6 +823,19 @@ impl ViewerApp {
             ShotState::Done => {}
         }
     }
+}
+
+/// A combo box choosing one of `names` (shown only when there is a choice).
+fn pick(ui: &mut Ui, label: &str, names: &[String], index: &mut usize) {
+    if names.len() < 2 {
+        return;
+    }
+    let shown = &names[(*index).min(names.len() - 1)];
+    egui::ComboBox::from_label(label).selected_text(shown).show_ui(ui, |ui| {
+        for (i, n) in names.iter().enumerate() {
+            ui.selectable_value(index, i, n);
+        }
+    });
 }
 
 fn heat_legend(ui: &mut Ui, scale: f32) {

@@ -191,30 +191,38 @@ impl SceneDoc {
         self.table.get_mut(key)?.as_array_mut()?.get_mut(index)?.as_table_mut()
     }
 
+    /// Names of the `[[kind]]` tables (the loader's defaults for unnamed ones).
+    fn names(&self, kind: &str) -> Vec<String> {
+        (0..self.array(kind).len())
+            .map(|i| {
+                self.entry(kind, i)
+                    .and_then(|t| t.get("name"))
+                    .and_then(Value::as_str)
+                    .map_or_else(|| format!("{kind} {}", i + 1), str::to_owned)
+            })
+            .collect()
+    }
+
+    /// Sets (or, with `None`, removes) `key` of table `index` of `[[kind]]`.
+    fn set_field(&mut self, kind: &str, index: usize, key: &str, value: Option<Value>) {
+        if let Some(t) = self.entry_mut(kind, index) {
+            match value {
+                Some(v) => t.insert(key.to_owned(), v),
+                None => t.remove(key),
+            };
+        }
+    }
+
     /// Names of the materials, in order.
     #[must_use]
     pub fn material_names(&self) -> Vec<String> {
-        (0..self.array("material").len())
-            .map(|i| {
-                self.entry("material", i)
-                    .and_then(|t| t.get("name"))
-                    .and_then(Value::as_str)
-                    .map_or_else(|| format!("material {}", i + 1), str::to_owned)
-            })
-            .collect()
+        self.names("material")
     }
 
     /// Names of the objects, in order.
     #[must_use]
     pub fn object_names(&self) -> Vec<String> {
-        (0..self.array("object").len())
-            .map(|i| {
-                self.entry("object", i)
-                    .and_then(|t| t.get("name"))
-                    .and_then(Value::as_str)
-                    .map_or_else(|| format!("object {}", i + 1), str::to_owned)
-            })
-            .collect()
+        self.names("object")
     }
 
     /// A field of the selected material, if the file sets it.
@@ -225,17 +233,7 @@ impl SceneDoc {
 
     /// Sets (or, with `None`, removes) a field of the selected material.
     pub fn set_material_field(&mut self, key: &str, value: Option<Value>) {
-        let index = self.material;
-        if let Some(t) = self.entry_mut("material", index) {
-            match value {
-                Some(v) => {
-                    t.insert(key.to_owned(), v);
-                }
-                None => {
-                    t.remove(key);
-                }
-            }
-        }
+        self.set_field("material", self.material, key, value);
     }
 
     /// A field of the selected object, if the file sets it.
@@ -246,17 +244,7 @@ impl SceneDoc {
 
     /// Sets (or removes) a field of the selected object.
     pub fn set_object_field(&mut self, key: &str, value: Option<Value>) {
-        let index = self.object;
-        if let Some(t) = self.entry_mut("object", index) {
-            match value {
-                Some(v) => {
-                    t.insert(key.to_owned(), v);
-                }
-                None => {
-                    t.remove(key);
-                }
-            }
-        }
+        self.set_field("object", self.object, key, value);
     }
 
     /// The selected object's mesh: a built-in shape name or a file path.

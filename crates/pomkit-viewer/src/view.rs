@@ -81,6 +81,25 @@ impl Overlay {
     }
 }
 
+impl ViewRequest {
+    /// A request for `doc` at `width` x `height`: the material's own technique, no overlay.
+    #[must_use]
+    pub fn new(doc: SceneDoc, width: u32, height: u32) -> Self {
+        Self {
+            id: 0,
+            doc,
+            width,
+            height,
+            compare: None,
+            split: 0.5,
+            overlay: Overlay::None,
+            overlay_opacity: 1.0,
+            fetch_scale: 48.0,
+            reload: false,
+        }
+    }
+}
+
 impl std::str::FromStr for Overlay {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {

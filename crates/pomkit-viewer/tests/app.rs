@@ -240,16 +240,11 @@ fn a_moved_camera_or_light_reuses_the_prepared_scene_and_draws_the_same_picture(
     }
     use pomkit_viewer::view::{Overlay, ViewRenderer, ViewRequest};
     let request = |doc: SceneDoc, compare| ViewRequest {
-        id: 1,
-        doc,
-        width: 240,
-        height: 160,
         compare,
-        split: 0.5,
         overlay: Overlay::Fetches,
         overlay_opacity: 0.5,
         fetch_scale: 40.0,
-        reload: false,
+        ..ViewRequest::new(doc, 240, 160)
     };
     let ctx = pomkit_gpu::GpuContext::new().expect("adapter");
     let mut retained = ViewRenderer::new(ctx.clone());
