@@ -237,6 +237,26 @@ fn xvfb_script(script: &str, data_home: &Path) -> Option<Output> {
     Some(out)
 }
 
+/// A shell script that starts `pomkit view FLAGS` on the display, waits for its window, focuses
+/// it (the first click after focusing is swallowed, so it clicks once harmlessly), runs
+/// `actions` (xdotool commands) and quits with ctrl+Q, which saves the session.
+fn viewer_session(flags: &str, actions: &str) -> String {
+    format!(
+        r#"
+        "$POMKIT" view {flags} &
+        pid=$!
+        win=$(xdotool search --sync --name "pomkit view" | head -1)
+        sleep 3
+        xdotool windowfocus --sync "$win"
+        xdotool mousemove 700 300 click 1
+        sleep 0.5
+        {actions}
+        xdotool key ctrl+q
+        wait $pid
+        "#
+    )
+}
+
 /// The saved camera's eye, read from eframe's storage file.
 fn saved_eye(data_home: &Path) -> (Vec3, String) {
     let text = std::fs::read_to_string(data_home.join("pomkit-viewer/app.ron")).expect("the session was saved");
@@ -254,22 +274,14 @@ fn the_camera_and_view_settings_are_saved_and_restored_between_runs() {
     let dir = tempfile::tempdir().unwrap();
     // First run: a split view against steep; orbit the camera by dragging right (left of the
     // divider, which sits mid-view); quit.
-    let first = r#"
-        "$POMKIT" view --compare steep &
-        pid=$!
-        win=$(xdotool search --sync --name "pomkit view" | head -1)
-        sleep 3
-        xdotool windowfocus --sync "$win"
-        xdotool mousemove 700 300 click 1
-        sleep 0.5
-        xdotool mousemove 560 400 mousedown 1
+    let first = viewer_session(
+        "--compare steep",
+        r#"xdotool mousemove 560 400 mousedown 1
         for i in 1 2 3 4 5 6 7 8 9 10 11 12; do xdotool mousemove $((560 + i * 10)) 400; sleep 0.05; done
         xdotool mouseup 1
-        sleep 1
-        xdotool key ctrl+q
-        wait $pid
-    "#;
-    let Some(out) = xvfb_script(first, dir.path()) else { return };
+        sleep 1"#,
+    );
+    let Some(out) = xvfb_script(&first, dir.path()) else { return };
     assert!(out.status.success(), "first run failed:\n{}", stderr(&out));
     let (eye, text) = saved_eye(dir.path());
     let (default_eye, _) = SceneDoc::default().camera();
@@ -279,18 +291,8 @@ fn the_camera_and_view_settings_are_saved_and_restored_between_runs() {
 
     // Second run, no flags: quit at once. The restored session is saved again unchanged (a
     // viewer that forgot it would save the default camera and no split).
-    let second = r#"
-        "$POMKIT" view &
-        pid=$!
-        win=$(xdotool search --sync --name "pomkit view" | head -1)
-        sleep 3
-        xdotool windowfocus --sync "$win"
-        xdotool mousemove 700 300 click 1
-        sleep 0.5
-        xdotool key ctrl+q
-        wait $pid
-    "#;
-    let Some(out) = xvfb_script(second, dir.path()) else { return };
+    let second = viewer_session("", "");
+    let Some(out) = xvfb_script(&second, dir.path()) else { return };
     assert!(out.status.success(), "second run failed:\n{}", stderr(&out));
     let (again, text) = saved_eye(dir.path());
     assert!((again - eye).length() < 1e-4, "restored camera {again}, saved {eye}");

@@ -88,14 +88,16 @@ impl RenderOutput {
     /// sRGB8 pixels (`[r, g, b]` per pixel), with a gentle filmic tone curve applied first.
     #[must_use]
     pub fn to_srgb8(&self) -> Vec<[u8; 3]> {
-        self.color
-            .iter()
-            .map(|c| {
-                let t = tone(*c);
-                [t.x, t.y, t.z].map(|v| (crate::scene::linear_to_srgb(v) * 255.0 + 0.5) as u8)
-            })
-            .collect()
+        self.color.iter().map(|&c| srgb8(c)).collect()
     }
+}
+
+/// One pixel of [`RenderOutput::to_srgb8`]: linear colour through [`tone`], then sRGB-encoded
+/// to 8 bits.
+#[must_use]
+pub fn srgb8(c: Vec3) -> [u8; 3] {
+    let t = tone(c);
+    [t.x, t.y, t.z].map(|v| (crate::scene::linear_to_srgb(v) * 255.0 + 0.5) as u8)
 }
 
 /// The tone curve both renderers apply before sRGB encoding. A soft shoulder so bright highlights do not clip hard: `x / (1 + x / 4)` per channel after

@@ -855,7 +855,7 @@ fn heat_legend(ui: &mut Ui, scale: f32) {
     }
     ui.horizontal(|ui| {
         ui.small("0");
-        ui.add_space(ui.available_width() - 40.0);
+        ui.add_space((ui.available_width() - 40.0).max(0.0));
         ui.small(format!("{scale:.0}"));
     });
 }
@@ -863,9 +863,7 @@ fn heat_legend(ui: &mut Ui, scale: f32) {
 /// Saves an egui screenshot as an RGB PNG (atomically).
 fn save_color_image(img: &ColorImage, path: &Path) -> Result<(), String> {
     let [w, h] = img.size;
-    let rgb: Vec<u8> = img.pixels.iter().flat_map(|c| [c.r(), c.g(), c.b()]).collect();
-    pomkit_io::write_image(path, w as u32, h as u32, pomkit_io::PixelLayout::Rgb8, pomkit_io::Pixels::U8(&rgb))
-        .map_err(|e| e.to_string())
+    crate::view::write_rgb_png(path, w as u32, h as u32, img.as_raw())
 }
 
 impl eframe::App for ViewerApp {

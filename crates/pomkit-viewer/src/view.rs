@@ -398,9 +398,13 @@ impl ViewRenderer {
 
 fn side_stats(scene: &Scene, out: &RenderOutput, label: String, frame_ms: f64, from_timestamps: bool) -> SideStats {
     let label = if label == "material" {
-        let names: Vec<&str> = scene.materials.iter().map(|m| m.technique.name()).collect();
-        let mut names = names;
-        names.dedup();
+        // Each technique once, in the materials' order.
+        let mut names: Vec<&str> = Vec::new();
+        for m in &scene.materials {
+            if !names.contains(&m.technique.name()) {
+                names.push(m.technique.name());
+            }
+        }
         names.join("+")
     } else {
         label
@@ -421,8 +425,7 @@ pub fn overlaid(out: &RenderOutput, overlay: Overlay, opacity: f32, fetch_scale:
     let opacity = opacity.clamp(0.0, 1.0);
     let mut rgba = vec![0u8; out.color.len() * 4];
     rgba.par_chunks_mut(4).enumerate().for_each(|(i, px)| {
-        let t = pomkit_core::render::tone(out.color[i]);
-        let base = [t.x, t.y, t.z].map(|v| (pomkit_core::scene::linear_to_srgb(v) * 255.0 + 0.5) as u8);
+        let base = pomkit_core::render::srgb8(out.color[i]);
         let c = match overlay_color(out, i, overlay, fetch_scale) {
             Some(c) => std::array::from_fn(|k| {
                 (f32::from(base[k]) * (1.0 - opacity) + f32::from(c[k]) * opacity).round() as u8
@@ -509,10 +512,18 @@ pub fn export(doc: &SceneDoc, image: &ViewImage, png: &Path, note: Option<&str>)
         f.write_all(text.as_bytes()).map_err(pomkit_io::WriteFail::Io)
     })
     .map_err(|e| e.to_string())?;
-    let rgb: Vec<u8> = image.rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
-    pomkit_io::write_image(&png, image.width, image.height, pomkit_io::PixelLayout::Rgb8, pomkit_io::Pixels::U8(&rgb))
-        .map_err(|e| e.to_string())?;
+    write_rgb_png(&png, image.width, image.height, &image.rgba)?;
     Ok(toml_path)
+}
+
+/// Writes RGBA8 pixels as an RGB PNG (atomically), dropping alpha.
+///
+/// # Errors
+/// The write error's message, naming the file.
+pub fn write_rgb_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<(), String> {
+    let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+    pomkit_io::write_image(path, width, height, pomkit_io::PixelLayout::Rgb8, pomkit_io::Pixels::U8(&rgb))
+        .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]
