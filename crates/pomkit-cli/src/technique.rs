@@ -4,7 +4,9 @@
 use anyhow::{Result, bail};
 use clap::Args;
 use clap::builder::{PossibleValuesParser, TypedValueParser};
-use pomkit_core::trace::{MAX_SAMPLES, Technique, TraceParamError, TraceParams};
+use pomkit_core::trace::{
+    MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MAX_SAMPLES, MIN_PERSPECTIVE_BIAS, Technique, TraceParamError, TraceParams,
+};
 
 use crate::bake::EdgesArg;
 
@@ -35,8 +37,8 @@ pub struct TechniqueArgs {
     /// pom: secant refinement steps after the linear search (one fetch each, at most 64).
     #[arg(long, default_value_t = 0, value_name = "K")]
     pub refine: u32,
-    /// pom-classic: Brawley's perspective bias. 1 gives the exact parallax length; smaller
-    /// values shorten the trace toward grazing angles (less shimmer, flatter relief).
+    /// pom-classic: Brawley's perspective bias, 0 to 1. 1 gives the exact parallax length;
+    /// smaller values shorten the trace toward grazing angles (less shimmer, flatter relief).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_name = "B")]
     pub perspective_bias: f32,
     /// Height map borders: wrap (tiling textures) or clamp.
@@ -63,10 +65,18 @@ impl TechniqueArgs {
         if let Err(e) = params.validate() {
             match e {
                 TraceParamError::DepthScale(v) => {
-                    bail!("--depth-scale {v}: the depth scale must be a finite number greater than 0 (UV units)")
+                    bail!(
+                        "--depth-scale {v}: the depth scale must be greater than 0 and at most {MAX_DEPTH_SCALE} \
+                         (UV units: the deepest point lies at most {MAX_DEPTH_SCALE} tile widths below the \
+                         polygon; deeper relief is beyond what parallax mapping can show)"
+                    )
                 }
                 TraceParamError::PerspectiveBias(v) => {
-                    bail!("--perspective-bias {v}: the bias must be a finite number")
+                    bail!(
+                        "--perspective-bias {v}: the bias must lie in [{MIN_PERSPECTIVE_BIAS}, \
+                         {MAX_PERSPECTIVE_BIAS}] (1 traces the exact parallax length, smaller values \
+                         shorten it toward grazing angles)"
+                    )
                 }
                 TraceParamError::SampleBounds { min, max } => {
                     bail!("--min-samples {min} exceeds --max-samples {max}")
@@ -106,5 +116,9 @@ pub fn parse_list(s: &str) -> Result<Vec<Technique>> {
     Ok(list)
 }
 
-// The help above quotes the clamp: keep it true.
+// The help above quotes the clamp and the bias range: keep them true.
 const _: () = assert!(MAX_SAMPLES == 1024, "update the sample-count clamp quoted in TechniqueArgs' help");
+const _: () = assert!(
+    MIN_PERSPECTIVE_BIAS == 0.0 && MAX_PERSPECTIVE_BIAS == 1.0,
+    "update the perspective-bias range quoted in TechniqueArgs' help"
+);

@@ -199,11 +199,15 @@ impl HeightField {
         let t = if t.is_finite() { t } else { Vec2::ZERO };
         let f = t.floor();
         let (fx, fy) = (t.x - f.x, t.y - f.y);
+        // `as` saturates far outside the i64 range (|uv| * size beyond 9.2e18); the neighbour then
+        // saturates too rather than overflow (such coordinates carry no sub-texel position in f32
+        // anyway).
         let (x0, y0) = (f.x as i64, f.y as i64);
+        let (x1, y1) = (x0.saturating_add(1), y0.saturating_add(1));
         let d00 = self.depth_at(x0, y0, edges);
-        let d10 = self.depth_at(x0 + 1, y0, edges);
-        let d01 = self.depth_at(x0, y0 + 1, edges);
-        let d11 = self.depth_at(x0 + 1, y0 + 1, edges);
+        let d10 = self.depth_at(x1, y0, edges);
+        let d01 = self.depth_at(x0, y1, edges);
+        let d11 = self.depth_at(x1, y1, edges);
         let top = d00 + (d10 - d00) * fx;
         let bottom = d01 + (d11 - d01) * fx;
         top + (bottom - top) * fy

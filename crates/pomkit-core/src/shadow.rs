@@ -10,7 +10,8 @@
 
 use glam::{DVec3, Vec2, Vec3};
 
-use crate::trace::{Surface, TraceParams, adaptive_samples, exact_first_hit};
+use crate::heightfield::EdgeMode;
+use crate::trace::{MIN_COS, Surface, Technique, TraceParams, adaptive_samples, exact_first_hit, unit_direction};
 
 /// How self-shadowing is computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -57,6 +58,22 @@ impl std::str::FromStr for ShadowMode {
     }
 }
 
+impl ShadowMode {
+    /// The most fetches one [`shadow`] call may make in this mode with `params` on `surface`:
+    /// 0 for `none`; `max_samples - 1` for `hard` and `soft` (samples `1..n` with
+    /// `n <= max_samples <= MAX_SAMPLES`); for `exact`, the exact tracer's bound
+    /// ([`Surface::exact_fetch_bound`], which counts the fetch that lifts the receiver).
+    #[must_use]
+    pub fn fetch_bound(self, params: &TraceParams, surface: &Surface) -> u32 {
+        let p = params.sanitized();
+        match self {
+            ShadowMode::None => 0,
+            ShadowMode::Hard | ShadowMode::Soft => p.max_samples.saturating_sub(1),
+            ShadowMode::Exact => Technique::Exact.fetch_bound(&p, surface),
+        }
+    }
+}
+
 /// Shadow parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadowParams {
@@ -87,7 +104,12 @@ pub struct Shadow {
 ///
 /// Where the geometric N.L <= 0 the polygon faces away from the light: visibility 0 with no
 /// fetch (Tatarchuk 2006 skips the trace there). Samples use `params.lod` and the pom sample
-/// bounds, adapted to the light's angle as view rays are.
+/// bounds, adapted to the light's angle as view rays are. `light` need not be unit length: any
+/// finite, non-zero vector is normalized ([`unit_direction`]); a zero or non-finite one gives
+/// visibility 1 with no fetch. Where the edges wrap, `uv` is first reduced to its tile (as
+/// [`crate::trace::trace`] does), so huge UVs cost what small ones do. Every loop is bounded:
+/// `hard`/`soft` take `n - 1 < MAX_SAMPLES` samples, `exact` at most
+/// [`ShadowMode::fetch_bound`] fetches.
 #[must_use]
 pub fn shadow(
     surface: &Surface,
@@ -97,12 +119,20 @@ pub fn shadow(
     shadow: &ShadowParams,
     params: &TraceParams,
 ) -> Shadow {
-    let Some(l) = light.try_normalize().filter(|l| l.is_finite()) else {
+    let Some(l) = unit_direction(light) else {
         return Shadow { visibility: 1.0, fetches: 0 };
     };
     if l.z <= 0.0 {
         return Shadow { visibility: 0.0, fetches: 0 };
     }
+    let l = l.as_vec3();
+    // The point in its own tile where the surface repeats (the result is a visibility, so the
+    // tile offset is not needed back).
+    let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
+    let uv = match surface.edges() {
+        EdgeMode::Wrap => (uv.as_dvec2() - uv.as_dvec2().floor()).as_vec2(),
+        EdgeMode::Clamp => uv,
+    };
     let depth = if depth.is_finite() { depth.clamp(0.0, 1.0) } else { 0.0 };
     if shadow.mode == ShadowMode::None || depth <= 0.0 {
         // Nothing lies above the polygon's surface: a point on it is never self-shadowed.
@@ -110,7 +140,7 @@ pub fn shadow(
     }
     let p = params.sanitized();
     // UV offset per unit of depth climbed toward the light.
-    let s = Vec2::new(l.x, l.y) * (p.depth_scale / l.z.max(crate::trace::MIN_COS));
+    let s = Vec2::new(l.x, l.y) * (p.depth_scale / l.z.max(MIN_COS));
     match shadow.mode {
         ShadowMode::None => Shadow { visibility: 1.0, fetches: 0 },
         ShadowMode::Hard | ShadowMode::Soft => {

@@ -30,6 +30,35 @@ pub const MIN_COS: f32 = 1e-3;
 /// section 6, "huge sample counts").
 pub const MAX_SAMPLES: u32 = 1024;
 
+/// The deepest relief accepted: `depth_scale` is at most this many UV units (tile widths).
+///
+/// `depth_scale` is the depth of the deepest point below the polygon relative to the width of
+/// one texture tile. Parallax mapping models the relief as a shallow displacement seen through
+/// the polygon: at 1 it is already as deep as the tile is wide (slopes of 45 degrees across the
+/// whole tile), and beyond a few tile widths a view ray crosses many tiles before it reaches
+/// the bottom (up to `depth_scale / MIN_COS`, 1000 tile widths per unit of depth scale, at the
+/// flattest ray accepted), so the picture is the texture smeared along the ray while the cost of
+/// every marching technique, and of `exact`, grows with that length. 16 leaves ample room above
+/// any value that shows relief (the viewer's slider stops at 0.3) and keeps the exact tracer's
+/// worst case bounded ([`Technique::fetch_bound`]). [`TraceParams::validate`] refuses larger
+/// values; [`TraceParams::sanitized`] clamps them.
+pub const MAX_DEPTH_SCALE: f32 = 16.0;
+
+/// The smallest `perspective_bias` accepted (see [`MAX_PERSPECTIVE_BIAS`]).
+pub const MIN_PERSPECTIVE_BIAS: f32 = 0.0;
+
+/// The largest `perspective_bias` accepted.
+///
+/// `pom-classic` scales the parallax vector by `b(cos) = pb + (1 - pb) (2 cos - 1)`, clamped at 0,
+/// where `cos` is the cosine of the view angle: 1 head-on for every `pb`, and `2 pb - 1` at
+/// grazing. For `pb` in `[0, 1]` the factor stays in `[0, 1]`: 1 traces the exact parallax
+/// length, smaller values shorten the trace toward grazing angles, down to 0 (which switches the
+/// parallax off from 60 degrees on). Above 1 the trace is longer than the ray itself (the hit is
+/// reported at a depth the ray has not reached there), and below 0 the parallax vanishes at ever
+/// steeper angles; both are refused by [`TraceParams::validate`] and clamped by
+/// [`TraceParams::sanitized`].
+pub const MAX_PERSPECTIVE_BIAS: f32 = 1.0;
+
 /// A ray entering the polygon.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {
@@ -138,6 +167,10 @@ impl Technique {
     }
 
     /// The most fetches one view trace may take with `params` (the bound the tests check).
+    ///
+    /// Every technique's loops run a fixed number of times (each at most [`MAX_SAMPLES`], or 64
+    /// refinement steps), except `exact`'s traversal, whose bound grows with the length of the
+    /// ray in texels: see [`Surface::exact_fetch_bound`].
     #[must_use]
     pub fn fetch_bound(self, params: &TraceParams, surface: &Surface) -> u32 {
         let p = params.sanitized();
@@ -149,7 +182,7 @@ impl Technique {
             Technique::PomClassic => 8,
             Technique::Pom => p.max_samples + 1 + p.refine,
             Technique::Relief => p.samples + p.binary_steps,
-            Technique::Exact => surface.exact_fetch_cap(),
+            Technique::Exact => surface.exact_fetch_bound(p.depth_scale),
         }
     }
 }
@@ -187,7 +220,8 @@ impl std::str::FromStr for Technique {
 /// Parameters shared by the techniques (the command line's technique options).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TraceParams {
-    /// How far below the surface, in UV units, the deepest point lies. Default 0.1.
+    /// How far below the surface, in UV units, the deepest point lies: greater than 0 and at
+    /// most [`MAX_DEPTH_SCALE`]. Default 0.1.
     pub depth_scale: f32,
     /// `pom`: fewest samples (head-on). Default 8.
     pub min_samples: u32,
@@ -201,8 +235,9 @@ pub struct TraceParams {
     pub binary_steps: u32,
     /// `pom`: secant refinement steps after the linear search (Unity HDRP style). Default 0.
     pub refine: u32,
-    /// `pom-classic`: Brawley's perspective bias. 1 gives the exact parallax length; smaller
-    /// values shorten the trace toward grazing angles (less shimmer, flatter relief). Default 1.
+    /// `pom-classic`: Brawley's perspective bias, in `[0, 1]` ([`MAX_PERSPECTIVE_BIAS`]). 1
+    /// gives the exact parallax length; smaller values shorten the trace toward grazing angles
+    /// (less shimmer, flatter relief). Default 1.
     pub perspective_bias: f32,
     /// Edge mode to build the [`Surface`] with (default wrap). Tracing itself samples with the
     /// surface's own mode, which [`Surface::new`] fixes; keep the two equal.
@@ -232,11 +267,22 @@ impl Default for TraceParams {
 /// Why trace parameters were refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TraceParamError {
-    /// `depth_scale` is NaN, infinite, zero or negative.
-    #[error("depth_scale is {0}: it must be a finite number greater than 0")]
+    /// `depth_scale` is NaN, infinite, zero, negative or above [`MAX_DEPTH_SCALE`].
+    #[error(
+        "depth_scale is {0}: it must be greater than 0 and at most {max} (UV units: the deepest point \
+         lies at most {max} tile widths below the polygon; deeper relief is beyond what parallax \
+         mapping can show)",
+        max = MAX_DEPTH_SCALE
+    )]
     DepthScale(f32),
-    /// `perspective_bias` is NaN or infinite.
-    #[error("perspective_bias is {0}: it must be a finite number")]
+    /// `perspective_bias` is NaN, infinite or outside
+    /// `[MIN_PERSPECTIVE_BIAS, MAX_PERSPECTIVE_BIAS]`.
+    #[error(
+        "perspective_bias is {0}: it must lie in [{min}, {max}] (1 traces the exact parallax length, \
+         smaller values shorten it toward grazing angles)",
+        min = MIN_PERSPECTIVE_BIAS,
+        max = MAX_PERSPECTIVE_BIAS
+    )]
     PerspectiveBias(f32),
     /// `lod` is NaN or infinite.
     #[error("lod is {0}: it must be a finite number")]
@@ -255,14 +301,15 @@ impl TraceParams {
     /// Checks the parameters.
     ///
     /// # Errors
-    /// [`TraceParamError`] for a non-positive or non-finite depth scale, a non-finite bias or
-    /// LOD, or `min_samples > max_samples`. Sample counts above [`MAX_SAMPLES`] and of zero are
-    /// not errors: they are clamped to `1..=MAX_SAMPLES`.
+    /// [`TraceParamError`] for a depth scale outside `(0, MAX_DEPTH_SCALE]` (or not finite), a
+    /// perspective bias outside `[MIN_PERSPECTIVE_BIAS, MAX_PERSPECTIVE_BIAS]`, a non-finite LOD,
+    /// or `min_samples > max_samples`. Sample counts above [`MAX_SAMPLES`] and of zero are not
+    /// errors: they are clamped to `1..=MAX_SAMPLES`.
     pub fn validate(&self) -> Result<(), TraceParamError> {
-        if !(self.depth_scale.is_finite() && self.depth_scale > 0.0) {
+        if !(self.depth_scale > 0.0 && self.depth_scale <= MAX_DEPTH_SCALE) {
             return Err(TraceParamError::DepthScale(self.depth_scale));
         }
-        if !self.perspective_bias.is_finite() {
+        if !(MIN_PERSPECTIVE_BIAS..=MAX_PERSPECTIVE_BIAS).contains(&self.perspective_bias) {
             return Err(TraceParamError::PerspectiveBias(self.perspective_bias));
         }
         if !self.lod.is_finite() {
@@ -275,18 +322,16 @@ impl TraceParams {
     }
 
     /// The parameters with counts clamped to `1..=MAX_SAMPLES` (refine and binary steps to
-    /// `0..=64`) and non-finite values replaced by defaults, so tracing never hangs or panics.
+    /// `0..=64`), the depth scale to at most [`MAX_DEPTH_SCALE`], the perspective bias into
+    /// `[MIN_PERSPECTIVE_BIAS, MAX_PERSPECTIVE_BIAS]`, and non-finite or non-positive values
+    /// replaced by defaults, so tracing never hangs or panics.
     #[must_use]
     pub fn sanitized(&self) -> Self {
         let d = Self::default();
         let c = |n: u32| n.clamp(1, MAX_SAMPLES);
         let max_samples = c(self.max_samples);
         Self {
-            depth_scale: if self.depth_scale.is_finite() && self.depth_scale > 0.0 {
-                self.depth_scale
-            } else {
-                d.depth_scale
-            },
+            depth_scale: sanitized_depth_scale(self.depth_scale),
             min_samples: c(self.min_samples).min(max_samples),
             max_samples,
             samples: c(self.samples),
@@ -294,7 +339,7 @@ impl TraceParams {
             binary_steps: self.binary_steps.min(64),
             refine: self.refine.min(64),
             perspective_bias: if self.perspective_bias.is_finite() {
-                self.perspective_bias
+                self.perspective_bias.clamp(MIN_PERSPECTIVE_BIAS, MAX_PERSPECTIVE_BIAS)
             } else {
                 d.perspective_bias
             },
@@ -302,6 +347,12 @@ impl TraceParams {
             lod: if self.lod.is_finite() { self.lod.max(0.0) } else { 0.0 },
         }
     }
+}
+
+/// `depth_scale` clamped to `(0, MAX_DEPTH_SCALE]`; NaN, infinite, zero and negative values give
+/// the default 0.1 (infinity too: it is no depth at all, not the deepest one).
+fn sanitized_depth_scale(depth_scale: f32) -> f32 {
+    if depth_scale.is_finite() && depth_scale > 0.0 { depth_scale.min(MAX_DEPTH_SCALE) } else { 0.1 }
 }
 
 /// A height field prepared for tracing: its mip chain, its maximum-height pyramid and the
@@ -322,7 +373,7 @@ impl Surface {
     #[must_use]
     pub fn new(field: HeightField, edges: EdgeMode, depth_scale: f32) -> Self {
         let pyramid = MaxHeightPyramid::new(&field, edges);
-        let scale = if depth_scale.is_finite() && depth_scale > 0.0 { depth_scale } else { 0.1 };
+        let scale = sanitized_depth_scale(depth_scale);
         let parallax = if field.width() >= 2 && field.height() >= 2 {
             let opts = NormalBakeOptions {
                 scale: scale * field.width() as f32,
@@ -376,14 +427,55 @@ impl Surface {
         self.mips.sample(uv, lod, self.edges)
     }
 
-    /// A generous cap on the exact tracer's steps: it stops there (and reports the point it
-    /// reached) rather than loop forever on input no test has foreseen.
+    /// The most fetches the exact tracer makes for any one view or shadow ray at `depth_scale`
+    /// (sanitized as [`TraceParams::sanitized`] does), saturating at `u32::MAX`.
+    ///
+    /// A ray's UV travel per unit of depth is at most `depth_scale / MIN_COS` (the flattest ray
+    /// accepted), so it crosses at most `depth_scale / MIN_COS * width + 2` texel columns and as
+    /// many rows (scaled by the height); the traversal makes at most
+    /// `2 * (columns + rows) + 3` steps ([`exact_step_bound`]) and at most 4 fetches per step
+    /// (one pyramid gather, up to three bilinear patches). This is a proof of termination, not
+    /// the typical cost: the pyramid skips empty stretches a tile at a time, so a typical ray
+    /// makes O(log size) fetches per tile it crosses.
     #[must_use]
-    pub fn exact_fetch_cap(&self) -> u32 {
+    pub fn exact_fetch_bound(&self, depth_scale: f32) -> u32 {
         let f = self.field();
-        let span = (f.width() + f.height()) as u64 * (self.pyramid.len() as u64 + 2) * 64;
-        span.min(u64::from(u32::MAX / 2)) as u32 + 4096
+        // A relative margin covers the f32 rounding of the ray's UV step.
+        let travel = f64::from(sanitized_depth_scale(depth_scale)) / f64::from(MIN_COS) * (1.0 + 1e-4);
+        let d = DVec3::new(travel * f64::from(f.width()), travel * f64::from(f.height()), 1.0);
+        let (w, h) = (i64::from(f.width()), i64::from(f.height()));
+        let steps = exact_step_bound(d, 0.0, 1.0, w, h, self.edges);
+        // One pyramid gather per step plus up to three patches on the leaf steps; shadows add
+        // one fetch to lift the receiver (counted here too).
+        u32::try_from(steps.saturating_mul(4).saturating_add(1)).unwrap_or(u32::MAX)
     }
+}
+
+/// Splits `uv` into its tile `k = floor(uv)` (per axis, in f64) and the point `uv - k` in that
+/// tile, where the edges wrap; with clamped edges the plane does not tile: `(uv, 0)`.
+///
+/// Where the surface repeats, tracing from `uv - k` and adding `k` back to the hit gives the
+/// hit of the ray in its own tile frame, with the f32 arithmetic of the trace done on small
+/// numbers. The reduced point is exact (an f32 `uv` with `|uv| >= 1` is a multiple of its ulp,
+/// so is `uv - k < 1`; for `|uv| >= 2^23` it is 0: such a `uv` is a whole number of tiles); for
+/// small negative `uv` it may round up to 1, the same point of the surface within 2^-24.
+fn reduce_to_tile(uv: Vec2, edges: EdgeMode) -> (Vec2, DVec2) {
+    match edges {
+        EdgeMode::Wrap => {
+            let u = uv.as_dvec2();
+            let k = u.floor();
+            ((u - k).as_vec2(), k)
+        }
+        EdgeMode::Clamp => (uv, DVec2::ZERO),
+    }
+}
+
+/// A point of the reduced frame of [`reduce_to_tile`] back in the ray's own tile frame: the
+/// sum is formed in f64 and rounded once to f32, so far from the origin the result carries what
+/// f32 can hold there (at `u = 1e15` its spacing is 2^26 = 67 108 864 tiles: a hit there is the
+/// entry point, rounded, while its depth is the exact one of the reduced trace).
+fn unreduce(uv: Vec2, tile: DVec2) -> Vec2 {
+    if tile == DVec2::ZERO { uv } else { (uv.as_dvec2() + tile).as_vec2() }
 }
 
 /// The UV offset per unit depth along `dir` (unit, `dz < 0`): `depth_scale * (du, dv) / -dz`.
@@ -391,34 +483,70 @@ fn uv_per_depth(dir: Vec3, depth_scale: f32) -> Vec2 {
     Vec2::new(dir.x, dir.y) * (depth_scale / -dir.z)
 }
 
-/// Normalizes `dir` and steepens it to [`MIN_COS`]; `None` for rays that do not enter
-/// (`dz >= 0`) or are not finite.
-fn entering(dir: Vec3) -> Option<Vec3> {
-    if !dir.is_finite() {
+/// `v` as a unit vector, whatever its finite length: it is divided by its largest component
+/// first and normalized in f64, so `(1e20, 1e20, -1e20)` and `(1e-30, 1e-30, -1e-30)` (whose
+/// squared lengths overflow or underflow f32) both give `(1, 1, -1) / sqrt(3)`. `None` for a
+/// zero or non-finite vector.
+#[must_use]
+pub fn unit_direction(v: Vec3) -> Option<DVec3> {
+    if !v.is_finite() {
         return None;
     }
-    let d = dir.try_normalize()?;
+    let d = v.as_dvec3();
+    let largest = d.abs().max_element();
+    if largest == 0.0 {
+        return None;
+    }
+    // Every component of d / largest lies in [-1, 1] and one is +-1: the length is in [1, 2].
+    Some((d / largest).normalize())
+}
+
+/// Normalizes `dir` ([`unit_direction`]) and steepens it to [`MIN_COS`]; `None` for rays that do
+/// not enter (`dz >= 0`, decided in f64 before rounding to f32) or are zero or not finite.
+fn entering(dir: Vec3) -> Option<Vec3> {
+    let d = unit_direction(dir)?;
     if d.z >= 0.0 {
         return None;
     }
-    if -d.z >= MIN_COS {
-        return Some(d);
+    if -d.z >= f64::from(MIN_COS) {
+        return Some(d.as_vec3());
     }
-    let xy = Vec2::new(d.x, d.y).normalize_or_zero() * (1.0 - MIN_COS * MIN_COS).sqrt();
+    let xy = Vec2::new(d.x as f32, d.y as f32).normalize_or_zero() * (1.0 - MIN_COS * MIN_COS).sqrt();
     Some(Vec3::new(xy.x, xy.y, -MIN_COS))
 }
 
 /// Traces `ray` into `surface` with `technique`.
 ///
-/// Parameters are [`TraceParams::sanitized`] first, so any input gives a finite hit; validate
-/// them with [`TraceParams::validate`] to report bad input instead. `params.depth_scale` and
-/// `params.edges` should match the surface's (`iterative`'s parallax map uses the surface's).
+/// Parameters are [`TraceParams::sanitized`] first, so any input gives a finite hit in a
+/// bounded time ([`Technique::fetch_bound`]); validate them with [`TraceParams::validate`] to
+/// report bad input instead. `params.depth_scale` and `params.edges` should match the
+/// surface's (`iterative`'s parallax map uses the surface's).
+///
+/// Where the surface's edges wrap, the entry point is first reduced to its tile
+/// ([`reduce_to_tile`]): the trace runs from `uv - floor(uv)` and the hit is moved back by the
+/// same whole number of tiles, so the returned UV stays in the ray's own tile frame (not wrapped
+/// into `[0, 1]`) and the result does not depend on which tile the ray enters, up to the f32
+/// rounding of the returned UV: at `|u| = 1e15` an f32 cannot hold a sub-tile offset, so the
+/// hit's UV there is the entry tile's (rounded), while its depth and fetches are those of the
+/// same ray entering at the reduced point.
 #[must_use]
 pub fn trace(surface: &Surface, ray: &Ray, technique: Technique, params: &TraceParams) -> Hit {
-    let p = params.sanitized();
     let uv0 = if ray.uv.is_finite() { ray.uv } else { Vec2::ZERO };
     let none = Hit { uv: uv0, depth: 0.0, fetches: 0 };
     let Some(dir) = entering(ray.dir) else { return none };
+    let (reduced, tile) = reduce_to_tile(uv0, surface.edges);
+    let hit = trace_entering(surface, reduced, dir, technique, &params.sanitized());
+    Hit { uv: unreduce(hit.uv, tile), ..hit }
+}
+
+/// [`trace`] for a unit, entering direction and sanitized parameters.
+///
+/// Every loop here runs a bounded number of times: `iterative` `k <= MAX_SAMPLES`, `steep`
+/// `n <= MAX_SAMPLES`, `pom-classic` 8, `pom` `n <= MAX_SAMPLES` then `refine <= 64`, `relief`
+/// `n - 1 < MAX_SAMPLES` then `binary_steps <= 64`, and `exact` at most [`exact_step_bound`]
+/// steps.
+fn trace_entering(surface: &Surface, uv0: Vec2, dir: Vec3, technique: Technique, p: &TraceParams) -> Hit {
+    let none = Hit { uv: uv0, depth: 0.0, fetches: 0 };
     let s = uv_per_depth(dir, p.depth_scale);
     let at = |z: f32| uv0 + s * z;
     match technique {
@@ -459,9 +587,9 @@ pub fn trace(surface: &Surface, ray: &Ray, technique: Technique, params: &TraceP
             }
             Hit { uv: at(1.0), depth: 1.0, fetches }
         }
-        Technique::PomClassic => pom_classic(surface, uv0, dir, &p),
-        Technique::Pom => pom(surface, uv0, dir, s, &p),
-        Technique::Relief => relief(surface, uv0, s, &p),
+        Technique::PomClassic => pom_classic(surface, uv0, dir, p),
+        Technique::Pom => pom(surface, uv0, dir, s, p),
+        Technique::Relief => relief(surface, uv0, s, p),
         Technique::Exact => exact_view(surface, uv0, s),
     }
 }
@@ -626,13 +754,22 @@ pub(crate) struct ExactResult {
 /// walk descends, and in a level-0 cell the ray is solved against the (up to three) bilinear
 /// patches it crosses there. Works for rays going down (`d.z > 0`) and up (`d.z < 0`, shadow
 /// rays) and for wrapped and clamped edges.
+///
+/// # Termination
+/// The loop runs at most [`exact_step_bound`] times. Each step either returns, stops, descends
+/// a level, or advances `t` strictly ([`entered_cell`] guarantees `t_exit > t`) to the moment
+/// the ray crosses a wall of the current cell, a texel boundary. The ray crosses each texel
+/// boundary once and the crossing moment of a wall is a fixed number, so advances are at most
+/// the boundaries crossed; a level is climbed only on an advance and the walk starts at level
+/// 0, so descents are at most the advances. Callers reduce the entry point to its tile where
+/// the edges wrap, so the coordinates stay small and the f64 walls exact.
 pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1: f64) -> ExactResult {
     let pyr = surface.pyramid();
     let f = surface.field();
     let (w, h) = (i64::from(f.width()), i64::from(f.height()));
     let edges = surface.edges();
     let top = pyr.len() - 1;
-    let cap = surface.exact_fetch_cap();
+    let max_steps = exact_step_bound(d, t0, t1, w, h, edges);
     let mut fetches = 0u32;
     let mut t = t0;
     // Start at the finest level: most rays meet the surface within a few texels of where they
@@ -645,19 +782,20 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
     let mut blocks: [Option<(i64, i64)>; 34] = [None; 34];
     // The bilinear patch last gathered: neighbouring texel footprints share patches.
     let mut last_patch: Option<(i64, i64)> = None;
-    // A tiny step in t that moves the probe point well under a texel, used to pick the cell the
-    // ray is entering when it sits exactly on a wall.
-    let speed = d.x.abs().max(d.y.abs()).max(1.0);
-    let nudge = 1e-9 / speed;
-    while t <= t1 && fetches < cap {
-        let probe = o + d * (t + nudge).min(t1);
-        let cell = cell_at(pyr, level, probe.x, probe.y, w, h, edges);
-        let t_exit = exit_time(&cell, o, d, t, t1);
+    for _ in 0..max_steps {
+        if t > t1 {
+            break;
+        }
+        let Some((cell, probe, t_exit)) = entered_cell(pyr, level, o, d, t, t1, w, h, edges) else {
+            // No wall ahead can be told from the current point in f64: unreachable for rays whose
+            // texel travel is below about 2^50 (all sanitized rays); give up rather than spin.
+            break;
+        };
         // One gather per sibling block: stepping between siblings costs no fetch.
         let key = block_key(&cell, level, edges);
         if blocks[level.min(33)] != Some(key) {
             blocks[level.min(33)] = Some(key);
-            fetches += 1;
+            fetches = fetches.saturating_add(1);
         }
         let bound = f64::from(pyr.min_depth(level, cell.ix, cell.iy));
         // The deepest point of the ray inside the cell is at its exit (going down) or entry
@@ -672,7 +810,7 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
             // parent's bound is already known to be reached, and climbing would only descend
             // again.
             if level < top {
-                let parent = cell_at(pyr, level + 1, probe.x, probe.y, w, h, edges);
+                let parent = cell_at(pyr, level + 1, probe, d, w, h, edges);
                 if exit_time(&parent, o, d, t, t1) <= t_exit {
                     level += 1;
                 }
@@ -681,16 +819,17 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
             continue;
         }
         if level > 0 {
-            // Going down, nothing is hit before the ray reaches the bound: jump there.
+            // Going down, nothing is hit before the ray reaches the bound: jump there (never
+            // past the cell, where the bound is known to be reached).
             if d.z > 0.0 {
-                t = t.max((bound - o.z) / d.z);
+                t = t.max(((bound - o.z) / d.z).min(t_exit));
             }
             level -= 1;
             continue;
         }
         // Level 0: solve against the bilinear patches inside this texel footprint.
         let (hit, gathers) = leaf_hit(f, edges, o, d, t, t_exit, &cell, &mut last_patch);
-        fetches += gathers;
+        fetches = fetches.saturating_add(gathers);
         if let Some(th) = hit {
             return ExactResult { t: Some(th), fetches };
         }
@@ -702,6 +841,71 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
         t = t_exit;
     }
     ExactResult { t: None, fetches }
+}
+
+/// The most steps [`exact_first_hit`] takes for a ray with texel-space direction `d` over
+/// `t` in `[t0, t1]` on a `w` x `h` field: `2 * (columns + rows) + 3`, where `columns` bounds the
+/// texel boundaries `x = integer` the ray crosses (`floor(|d.x| (t1 - t0)) + 2`, one more than
+/// exact arithmetic needs, for rounding; with clamped edges at most the `w - 1` interior
+/// boundaries, the border cells reaching to infinity) and `rows` likewise. See the proof on
+/// [`exact_first_hit`]: at most one advance per boundary crossed plus the last, and at most as
+/// many descents as advances. Saturates at `u64::MAX`.
+pub(crate) fn exact_step_bound(d: DVec3, t0: f64, t1: f64, w: i64, h: i64, edges: EdgeMode) -> u64 {
+    let span = if t1 > t0 { t1 - t0 } else { 0.0 };
+    let walls = |dp: f64, n: i64| -> f64 {
+        let crossed = (dp.abs() * span).floor() + 2.0;
+        let crossed = if crossed.is_finite() { crossed } else { f64::MAX };
+        match edges {
+            EdgeMode::Wrap => crossed,
+            EdgeMode::Clamp => crossed.min((n - 1).max(0) as f64),
+        }
+    };
+    // `as` saturates for huge values (and the sum cannot be NaN).
+    let boundaries = (walls(d.x, w) + walls(d.y, h)) as u64;
+    boundaries.saturating_mul(2).saturating_add(3)
+}
+
+/// The cell of `level` the ray `o + t d` is in at `t`, moving forward: its probe point and the
+/// time the ray leaves it, strictly after `t` (unless `t >= t1`).
+///
+/// On a wall the cell chosen is the one the ray enters ([`cell_at`] rounds by direction). When
+/// rounding puts the computed point on the wrong side of a wall the ray is leaving (its
+/// crossing time is at or before `t`: no progress), the probe steps half a texel across every
+/// such wall, into the neighbour, whose far wall is at least a texel further. `None` if even
+/// that makes no progress (only for texel travel beyond about 2^50).
+#[expect(clippy::too_many_arguments, reason = "the pyramid level, the ray, its segment and the field's size")]
+fn entered_cell(
+    pyr: &MaxHeightPyramid,
+    level: usize,
+    o: DVec3,
+    d: DVec3,
+    t: f64,
+    t1: f64,
+    w: i64,
+    h: i64,
+    edges: EdgeMode,
+) -> Option<(Cell, DVec2, f64)> {
+    let p = o + d * t;
+    let mut probe = DVec2::new(p.x, p.y);
+    let cell = cell_at(pyr, level, probe, d, w, h, edges);
+    let t_exit = exit_time(&cell, o, d, t, t1);
+    if t_exit > t || t >= t1 {
+        return Some((cell, probe, t_exit));
+    }
+    let crossed = |wall: f64, p0: f64, dp: f64| (wall - p0) / dp <= t;
+    if d.x > 0.0 && crossed(cell.x1, o.x, d.x) {
+        probe.x = cell.x1 + 0.5;
+    } else if d.x < 0.0 && crossed(cell.x0, o.x, d.x) {
+        probe.x = cell.x0 - 0.5;
+    }
+    if d.y > 0.0 && crossed(cell.y1, o.y, d.y) {
+        probe.y = cell.y1 + 0.5;
+    } else if d.y < 0.0 && crossed(cell.y0, o.y, d.y) {
+        probe.y = cell.y0 - 0.5;
+    }
+    let cell = cell_at(pyr, level, probe, d, w, h, edges);
+    let t_exit = exit_time(&cell, o, d, t, t1);
+    (t_exit > t).then_some((cell, probe, t_exit))
 }
 
 /// Identifies the 2x2 sibling block holding `cell`. With wrapping edges: its parent's lower
@@ -744,16 +948,18 @@ struct Cell {
     y1: f64,
 }
 
-/// The cell of `level` containing texel-space point `(x, y)`.
+/// The cell of `level` containing texel-space point `p`, moving along `d`: on a wall, the cell
+/// on the side the ray travels to (an axis the ray moves backward along takes the cell whose
+/// interval `(lo, hi]` holds the point, others `[lo, hi)`).
 ///
 /// With wrapping edges the plane tiles: the cell is found in the tile containing the point and
 /// its walls are returned in unbounded coordinates. With clamped edges the border cells extend
 /// to infinity outward (the clamped surface continues the border texels unchanged).
-fn cell_at(pyr: &MaxHeightPyramid, level: usize, x: f64, y: f64, w: i64, h: i64, edges: EdgeMode) -> Cell {
+fn cell_at(pyr: &MaxHeightPyramid, level: usize, p: DVec2, d: DVec3, w: i64, h: i64, edges: EdgeMode) -> Cell {
     let (nw, nh) = pyr.level_size(level);
     let size = 1i64 << level;
-    let axis = |p: f64, n: i64, cells: u32| -> (u32, f64, f64) {
-        let fp = p.floor();
+    let axis = |p: f64, dp: f64, n: i64, cells: u32| -> (u32, f64, f64) {
+        let fp = if dp < 0.0 { p.ceil() - 1.0 } else { p.floor() };
         match edges {
             EdgeMode::Wrap => {
                 let tile = (fp / n as f64).floor();
@@ -773,8 +979,8 @@ fn cell_at(pyr: &MaxHeightPyramid, level: usize, x: f64, y: f64, w: i64, h: i64,
             }
         }
     };
-    let (ix, x0, x1) = axis(x, w, nw);
-    let (iy, y0, y1) = axis(y, h, nh);
+    let (ix, x0, x1) = axis(p.x, d.x, w, nw);
+    let (iy, y0, y1) = axis(p.y, d.y, h, nh);
     Cell { ix, iy, x0, x1, y0, y1 }
 }
 
@@ -840,12 +1046,15 @@ fn patch_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: 
     // Patch between texel centres (i, j) and (i + 1, j + 1), centres at k + 0.5.
     let i = (mid.x - 0.5).floor();
     let j = (mid.y - 0.5).floor();
+    // `as` saturates beyond the i64 range (clamped edges only: wrapped rays are reduced to their
+    // tile), where the clamped surface is the border texel's whichever neighbour is read.
     let (ii, jj) = (i as i64, j as i64);
+    let (ii1, jj1) = (ii.saturating_add(1), jj.saturating_add(1));
     let key = (ii, jj);
     let s00 = f64::from(f.depth_at(ii, jj, edges));
-    let s10 = f64::from(f.depth_at(ii + 1, jj, edges));
-    let s01 = f64::from(f.depth_at(ii, jj + 1, edges));
-    let s11 = f64::from(f.depth_at(ii + 1, jj + 1, edges));
+    let s10 = f64::from(f.depth_at(ii1, jj, edges));
+    let s01 = f64::from(f.depth_at(ii, jj1, edges));
+    let s11 = f64::from(f.depth_at(ii1, jj1, edges));
     // S(fx, fy) = a + b fx + c fy + e fx fy with fx = x - (i + 0.5), fy = y - (j + 0.5).
     let (a, b, c, e) = (s00, s10 - s00, s01 - s00, s00 - s10 - s01 + s11);
     let (fx0, fy0) = (o.x - (i + 0.5), o.y - (j + 0.5));

@@ -427,3 +427,217 @@ fn one_sample_techniques_are_continuous_at_normal_incidence() {
         assert!(straight.depth > 0.1, "{t}: the pyramids are not at the surface here");
     }
 }
+
+// ---- hardening: huge UVs, any direction length, bounded parameters, bounded loops ----
+
+/// The cobblestones of the repro: `builtin:cobblestones:64x64`.
+fn cobblestones() -> HeightField {
+    generate(Pattern::Cobblestones, N, N)
+}
+
+#[test]
+fn huge_uvs_with_wrapping_edges_trace_as_the_same_ray_in_the_first_tile() {
+    // The ray: u = 1e15 spun forever in `exact`. f32(1e15) = 999999986991104 is a whole
+    // number of tiles (f32 spacing there is 2^26), so with wrapping edges the ray meets the
+    // surface exactly as the same ray entering at u = 0 does: the independent truth is the
+    // brute-force search on that ray, and the hit's u is the entry's, to f32 precision.
+    let f = cobblestones();
+    let s = surface(f.clone(), EdgeMode::Wrap);
+    let p = params(EdgeMode::Wrap);
+    let dir = Vec3::new(0.5, 0.2, -0.6);
+    for u in [1e15f32, 3e14, -1e15, 1e30, f32::MAX] {
+        let ray = Ray::new(Vec2::new(u, 0.3), dir);
+        let reduced = Ray::new(Vec2::new(0.0, 0.3), dir);
+        let truth = brute_force(&f, EdgeMode::Wrap, &reduced, 0.1);
+        for t in Technique::ALL {
+            let hit = trace(&s, &ray, t, &p);
+            let small = trace(&s, &reduced, t, &p);
+            assert!(hit.uv.is_finite() && (0.0..=1.0).contains(&hit.depth), "{t} at u = {u}: {hit:?}");
+            assert_eq!((hit.depth, hit.fetches), (small.depth, small.fetches), "{t} at u = {u}");
+            assert_eq!(hit.uv.y, small.uv.y, "{t} at u = {u}");
+            // The hit u is the entry tile plus the reduced hit, rounded once to f32.
+            let expect = (f64::from(u) + f64::from(small.uv.x)) as f32;
+            assert_eq!(hit.uv.x, expect, "{t} at u = {u}");
+            assert!((f64::from(hit.uv.x) - f64::from(u)).abs() <= f64::from(u.abs()) * 1e-7, "{t} at u = {u}");
+        }
+        let exact = trace(&s, &ray, Technique::Exact, &p);
+        assert!((f64::from(exact.depth) - truth).abs() < 1e-4, "exact at u = {u}: {} vs {truth}", exact.depth);
+    }
+    // A tile offset that f32 still resolves: the hit is the reduced hit moved by whole tiles.
+    for (u, v) in [(4096.3f32, -77.6f32), (-3.7, 12.25), (1.0e6 + 0.5, 0.3)] {
+        let ray = Ray::new(Vec2::new(u, v), dir);
+        let (ku, kv) = (f64::from(u).floor(), f64::from(v).floor());
+        let reduced = Ray::new(Vec2::new((f64::from(u) - ku) as f32, (f64::from(v) - kv) as f32), dir);
+        let truth = brute_force(&f, EdgeMode::Wrap, &reduced, 0.1);
+        let hit = trace(&s, &ray, Technique::Exact, &p);
+        assert!((f64::from(hit.depth) - truth).abs() < 1e-4, "({u}, {v}): {} vs {truth}", hit.depth);
+        let on = on_ray(&reduced, truth, 0.1);
+        let expect = Vec2::new((f64::from(on.x) + ku) as f32, (f64::from(on.y) + kv) as f32);
+        let tol = 2.0 * f32::EPSILON * u.abs().max(v.abs()).max(1.0) + 1e-4 / N as f32;
+        assert!((hit.uv - expect).abs().max_element() <= tol, "({u}, {v}): {:?} vs {expect:?}", hit.uv);
+    }
+}
+
+#[test]
+fn exact_handles_rays_along_texel_walls_and_through_corners() {
+    // Rays entering exactly on texel boundaries and creeping along them (the walk's cell
+    // choice on a wall), against the brute-force truth.
+    let f = cobblestones();
+    for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
+        let s = surface(f.clone(), edges);
+        let p = params(edges);
+        for (uv, dir) in [
+            (Vec2::new(0.3, 0.5), Vec3::new(0.5, -1e-7, -0.6)),
+            (Vec2::new(0.5, 0.3), Vec3::new(-1e-7, 0.5, -0.6)),
+            (Vec2::new(0.25, 0.5), Vec3::new(-0.5, -0.5, -0.3)),
+            (Vec2::new(0.25, 0.5), Vec3::new(0.5, 0.5, -0.3)),
+            (Vec2::new(0.125, 0.75), Vec3::new(0.0, -1.0, -0.2)),
+        ] {
+            let ray = Ray::new(uv, dir);
+            let hit = trace(&s, &ray, Technique::Exact, &p);
+            let truth = brute_force(&f, edges, &ray, 0.1);
+            assert!(texels(hit.uv, on_ray(&ray, truth, 0.1)) < 1e-3, "{edges:?} {ray:?}: {hit:?} vs depth {truth}");
+            assert!(hit.fetches <= Technique::Exact.fetch_bound(&p, &s));
+        }
+    }
+}
+
+#[test]
+fn direction_length_does_not_matter() {
+    // The help promises that directions need not be unit length: (1e20, 1e20, -1e20) and
+    // (1e-30, 1e-30, -1e-30) overflowed or underflowed f32 normalization and returned the entry
+    // point with no fetch. Scaled by a power of two the direction is exactly the same ray.
+    let s = surface(cobblestones(), EdgeMode::Wrap);
+    let p = params(EdgeMode::Wrap);
+    let uv = Vec2::new(0.3, 0.4);
+    for unit in [Vec3::new(1.0, 1.0, -1.0), Vec3::new(0.5, 0.2, -0.6), Vec3::new(-0.9, 0.1, -0.05)] {
+        for t in Technique::ALL {
+            let want = trace(&s, &Ray::new(uv, unit), t, &p);
+            for scale in [2f32.powi(100), 2f32.powi(-100), 2f32.powi(-140)] {
+                let got = trace(&s, &Ray::new(uv, unit * scale), t, &p);
+                if (unit * scale).abs().max_element() > 0.0 && (unit * scale / scale) == unit {
+                    assert_eq!(got, want, "{t} {unit} x {scale:e}");
+                }
+            }
+            // Decimal scalings round each component: the same ray to f32 precision.
+            for scale in [1e20f32, 1e-30, 1e30] {
+                let got = trace(&s, &Ray::new(uv, unit * scale), t, &p);
+                assert_eq!(got.fetches > 0, want.fetches > 0, "{t} {unit} x {scale:e}");
+                assert!(texels(got.uv, want.uv) < 0.05, "{t} {unit} x {scale:e}: {got:?} vs {want:?}");
+            }
+        }
+    }
+    // The literal directions.
+    for dir in [Vec3::new(1e20, 1e20, -1e20), Vec3::new(1e-30, 1e-30, -1e-30)] {
+        let got = trace(&s, &Ray::new(uv, dir), Technique::Exact, &p);
+        let want = trace(&s, &Ray::new(uv, Vec3::new(1.0, 1.0, -1.0)), Technique::Exact, &p);
+        assert_eq!(got, want, "{dir}");
+        assert!(got.fetches > 0 && got.depth > 0.0);
+    }
+    // Zero and non-entering directions keep their documented result: the entry point.
+    for dir in [Vec3::ZERO, Vec3::new(1e-30, 0.0, 1e-30), Vec3::new(1e20, 0.0, 0.0)] {
+        assert_eq!(trace(&s, &Ray::new(uv, dir), Technique::Pom, &p), Hit { uv, depth: 0.0, fetches: 0 });
+    }
+    // Lights too: a huge or tiny light vector is the same light.
+    let sp = ShadowParams { mode: ShadowMode::Exact, ..Default::default() };
+    let hit = trace(&s, &Ray::new(uv, Vec3::new(0.5, 0.2, -0.6)), Technique::Exact, &p);
+    let light = Vec3::new(-0.5, 0.25, 0.5);
+    let want = shadow(&s, hit.uv, hit.depth, light, &sp, &p);
+    for scale in [2f32.powi(100), 2f32.powi(-120)] {
+        assert_eq!(shadow(&s, hit.uv, hit.depth, light * scale, &sp, &p), want);
+    }
+}
+
+#[test]
+fn depth_scale_and_perspective_bias_are_bounded() {
+    use pomkit_core::trace::{MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MIN_PERSPECTIVE_BIAS, TraceParamError};
+    let ok = |p: TraceParams| p.validate().is_ok();
+    assert!(ok(TraceParams { depth_scale: MAX_DEPTH_SCALE, ..Default::default() }));
+    assert!(ok(TraceParams { depth_scale: 1e-6, ..Default::default() }));
+    for bad in [16.001f32, 1e4, 1e14, 1e20, 1e30, f32::INFINITY] {
+        let e = TraceParams { depth_scale: bad, ..Default::default() }.validate().unwrap_err();
+        assert_eq!(e, TraceParamError::DepthScale(bad));
+        assert!(e.to_string().contains("depth_scale") && e.to_string().contains("at most 16"), "{e}");
+    }
+    assert!(ok(TraceParams { perspective_bias: MIN_PERSPECTIVE_BIAS, ..Default::default() }));
+    assert!(ok(TraceParams { perspective_bias: MAX_PERSPECTIVE_BIAS, ..Default::default() }));
+    assert!(ok(TraceParams { perspective_bias: 0.5, ..Default::default() }));
+    for bad in [-1.0f32, -1e-6, 1.0001, 1.5, 1e30, f32::NAN] {
+        let e = TraceParams { perspective_bias: bad, ..Default::default() }.validate().unwrap_err();
+        assert!(matches!(e, TraceParamError::PerspectiveBias(_)), "{bad}: {e}");
+        assert!(e.to_string().contains("perspective_bias") && e.to_string().contains("[0, 1]"), "{e}");
+    }
+    // Sanitizing clamps to the same bounds, so a library caller who skips validation still
+    // gets a bounded trace.
+    let p = TraceParams { depth_scale: 1e30, perspective_bias: 1e30, ..Default::default() }.sanitized();
+    assert_eq!((p.depth_scale, p.perspective_bias), (MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS));
+    let p = TraceParams { perspective_bias: -1.0, ..Default::default() }.sanitized();
+    assert_eq!(p.perspective_bias, MIN_PERSPECTIVE_BIAS);
+}
+
+#[test]
+fn exact_at_the_largest_depth_scale_still_matches_brute_force() {
+    // The deepest relief accepted, at a grazing 85 degrees: the ray crosses about 180 tiles.
+    let f = cobblestones();
+    let depth = pomkit_core::trace::MAX_DEPTH_SCALE;
+    let s = Surface::new(f.clone(), EdgeMode::Wrap, depth);
+    let p = TraceParams { depth_scale: depth, ..params(EdgeMode::Wrap) };
+    for ray in rays_over(3, 85.0, 13) {
+        let hit = trace(&s, &ray, Technique::Exact, &p);
+        let truth = brute_force(&f, EdgeMode::Wrap, &ray, f64::from(depth));
+        assert!((f64::from(hit.depth) - truth).abs() < 1e-5, "{ray:?}: {} vs {truth}", hit.depth);
+        assert!(hit.fetches <= Technique::Exact.fetch_bound(&p, &s));
+    }
+}
+
+/// Directions of every length and slant: unit-ish, grazing, huge and tiny.
+fn any_direction() -> impl Strategy<Value = Vec3> {
+    let c = prop_oneof![Just(0.0f32), -1.0f32..1.0, Just(1e-38), Just(-1e-30)];
+    let len = prop_oneof![Just(1.0f32), Just(1e30), Just(1e20), Just(1e-30), Just(1e-40), 1e-3f32..1e3];
+    let dz = prop_oneof![Just(-1e-7f32), Just(-1e-4), Just(0.0), -1.0f32..0.1];
+    (c.clone(), c, dz, len).prop_map(|(x, y, z, l)| Vec3::new(x, y, z) * l)
+}
+
+/// UV coordinates from the first tile up to 1e30 and beyond, of either sign.
+fn any_coordinate() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        -2.0f32..3.0,
+        (1.0f32..1e30).prop_map(|x| x),
+        (1.0f32..1e30).prop_map(|x| -x),
+        Just(3e14f32),
+        Just(1e15),
+        Just(f32::MAX),
+        Just(-f32::MAX),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 160, ..ProptestConfig::default() })]
+    #[test]
+    fn every_technique_and_shadow_mode_is_finite_and_within_its_fetch_bound(
+        u in any_coordinate(), v in any_coordinate(), dir in any_direction(), light in any_direction(),
+        pattern in 0usize..4, wrap in any::<bool>(),
+        depth_scale in prop_oneof![0.001f32..0.5, Just(16.0f32), Just(1e30), Just(1e-30)],
+        bias in prop_oneof![Just(1.0f32), Just(0.0), Just(-1.0), Just(1e30), 0.0f32..1.0],
+    ) {
+        let pattern = [Pattern::Cobblestones, Pattern::Spike, Pattern::Text, Pattern::Bricks][pattern];
+        let edges = if wrap { EdgeMode::Wrap } else { EdgeMode::Clamp };
+        let s = Surface::new(generate(pattern, 24, 17), edges, depth_scale);
+        let p = TraceParams { depth_scale, perspective_bias: bias, edges, ..Default::default() };
+        let ray = Ray::new(Vec2::new(u, v), dir);
+        // The light as a direction toward it: flip the view-style z so most rays go up.
+        let light = Vec3::new(light.x, light.y, -light.z);
+        for t in Technique::ALL {
+            let hit = trace(&s, &ray, t, &p);
+            prop_assert!(hit.uv.is_finite() && hit.depth.is_finite(), "{t}: {hit:?}");
+            prop_assert!((0.0..=1.0).contains(&hit.depth), "{t}: depth {}", hit.depth);
+            prop_assert!(hit.fetches <= t.fetch_bound(&p, &s), "{t}: {} fetches", hit.fetches);
+            for mode in ShadowMode::ALL {
+                let sp = ShadowParams { mode, softness: 0.1 };
+                let sh = shadow(&s, hit.uv, hit.depth, light, &sp, &p);
+                prop_assert!((0.0..=1.0).contains(&sh.visibility), "{t} {mode:?}: {sh:?}");
+                prop_assert!(sh.fetches <= mode.fetch_bound(&p, &s), "{t} {mode:?}: {} fetches", sh.fetches);
+            }
+        }
+    }
+}

@@ -122,9 +122,9 @@ pub const TECHNIQUE_PARAMS: [Param; 9] = [
     Param {
         key: "perspective_bias",
         label: "Perspective bias",
-        kind: Kind::Float { min: 0.0, max: 1.5, log: false },
-        doc: "pom-classic: Brawley's perspective bias. 1 gives the exact parallax length; smaller values \
-              shorten the trace toward grazing angles (less shimmer, flatter relief).",
+        kind: Kind::Float { min: 0.0, max: 1.0, log: false },
+        doc: "pom-classic: Brawley's perspective bias, from 0 to 1. 1 gives the exact parallax length; smaller \
+              values shorten the trace toward grazing angles (less shimmer, flatter relief).",
     },
 ];
 
