@@ -36,7 +36,7 @@ pub struct CompareArgs {
     #[command(flatten)]
     height: HeightOption,
     /// How far below the surface, in UV units, the deepest point lies (Bevy's
-    /// parallax_depth_scale).
+    /// parallax_depth_scale): greater than 0 and at most 16 (tile widths).
     #[arg(long, default_value_t = 0.1, allow_negative_numbers = true, value_name = "S")]
     depth_scale: f32,
     /// View angles from the normal, in degrees, comma-separated, each in [0, 90).
@@ -81,7 +81,13 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         bail!("--rays {}: give between 1 and {MAX_RAYS} rays per angle", a.rays);
     }
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
-    output::check_writable(&out)?;
+    // Checked before any work; the table appears only when complete, never over the height map.
+    let mut outs = pomkit_io::output::Outputs::new();
+    if !a.height.input.starts_with("builtin:") {
+        outs.input(&a.height.input);
+    }
+    let out_id = outs.output(&out);
+    outs.check()?;
     let field = a.height.load()?;
     let (w, h) = (field.width(), field.height());
     let surface = Surface::new(field, params.edges, params.depth_scale);
@@ -93,11 +99,15 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         "Error in texels against `exact` on {} ({w}x{h}, depth scale {}, {edges} edges), {} rays per angle, seed {}.",
         a.height.input, params.depth_scale, a.rays, a.seed
     );
-    output::write_text(&out, |wr| match a.format {
-        Format::Md => write_md(wr, &caption, &rows),
-        Format::Csv => write_csv(wr, &rows),
-        Format::Json => write_json(wr, &rows),
+    outs.write_with(out_id, |wr| {
+        match a.format {
+            Format::Md => write_md(wr, &caption, &rows),
+            Format::Csv => write_csv(wr, &rows),
+            Format::Json => write_json(wr, &rows),
+        }
+        .map_err(anyhow::Error::from)
     })?;
+    outs.commit()?;
     if !output::is_stdout(&out) {
         eprintln!("wrote {} ({} rows)", out.display(), rows.len());
     }
@@ -203,3 +213,7 @@ fn write_json(w: &mut dyn Write, rows: &[AccuracyRow]) -> std::io::Result<()> {
     writeln!(w, "]")?;
     Ok(())
 }
+
+// The help above quotes the depth-scale limit: keep it true.
+const _: () =
+    assert!(pomkit_core::trace::MAX_DEPTH_SCALE == 16.0, "update the depth-scale limit quoted in CompareArgs' help");

@@ -1,25 +1,27 @@
 //! `pomkit trace`: rays from a CSV file traced with one technique; hits to a CSV file
 //! (DESIGN section 5).
 
-use std::io::Read;
-use std::path::{Path, PathBuf};
+use std::fs::File;
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
-use pomkit_core::glam::{Vec2, Vec3};
 use pomkit_core::trace::{Hit, Ray, Surface, Technique, trace};
+use pomkit_io::output::Outputs;
+use pomkit_io::rays::RayReader;
 use rayon::prelude::*;
 
 use crate::technique::{TechniqueArgs, technique_parser};
 use crate::{HeightOption, output, progress};
 
-/// The header of a rays file.
-pub const RAYS_HEADER: [&str; 5] = ["u", "v", "dx", "dy", "dz"];
 /// The header of a hits file.
 pub const HITS_HEADER: &str = "u,v,depth,fetches";
 
-/// Rays per unit of parallel work (and per progress step).
+/// Rays per unit of parallel work.
 const CHUNK: usize = 4096;
+/// Rays read, traced and written at a time: bounds the memory of a stream of any length.
+const BATCH: usize = 64 * CHUNK;
 /// Fewer rays than this finish in well under a second: no bar.
 const MIN_RAYS_FOR_BAR: u64 = 200_000;
 
@@ -35,7 +37,17 @@ height fetches the technique made.
 
 Rays that do not enter the surface (dz >= 0, or a zero direction) are not errors: every \
 technique returns the entry point at depth 0 with 0 fetches. Rays flatter than about 89.94 \
-degrees from the normal are steepened to it.")]
+degrees from the normal are steepened to it.
+
+Rays are streamed: read, traced and written in batches, so any number of rays takes bounded \
+memory. A line longer than 4096 bytes or holding a NUL byte is an error naming the line.
+
+Output: the hits file appears only when the whole run succeeds (it is written to a temporary \
+file beside it and renamed into place), so a bad line anywhere leaves no file. It may not be the \
+rays file or the height map (through any path or link); a read-only file is refused; a symbolic \
+link is written through (the file it points to is replaced, the link stays); a device such as \
+/dev/null is written in place; to standard output (`-o -`) hits are written as they are traced. \
+Write errors, a full disk or standard output included, fail the run.")]
 pub struct TraceArgs {
     #[command(flatten)]
     height: HeightOption,
@@ -58,102 +70,55 @@ pub struct TraceArgs {
 
 pub fn run(a: &TraceArgs) -> Result<()> {
     let params = a.options.params(a.depth_scale)?;
-    output::check_writable(&a.output)?;
-    let rays = read_rays(&a.rays)?;
+    // Every output is checked before any work, and never one of the inputs.
+    let mut outs = Outputs::new();
+    outs.input(&a.rays);
+    if !a.height.input.starts_with("builtin:") {
+        outs.input(&a.height.input);
+    }
+    let out = outs.output(&a.output);
+    outs.check()?;
+    let (reader, name): (Box<dyn BufRead>, String) = if output::is_stdout(&a.rays) {
+        (Box::new(std::io::stdin().lock()), "<stdin>".to_owned())
+    } else {
+        let file = File::open(&a.rays).with_context(|| format!("cannot read rays file {}", a.rays.display()))?;
+        (Box::new(BufReader::new(file)), a.rays.display().to_string())
+    };
+    let mut rays = RayReader::new(reader, &name)?;
     let field = a.height.load()?;
     let surface = Surface::new(field, params.edges, params.depth_scale);
-    let pb = progress::items(rays.len() as u64, MIN_RAYS_FOR_BAR, "tracing", "rays");
-    let hits: Vec<Hit> = rays
-        .par_chunks(CHUNK)
-        .map(|chunk| {
-            let hits: Vec<Hit> = chunk.iter().map(|ray| trace(&surface, ray, a.technique, &params)).collect();
-            pb.inc(chunk.len() as u64);
-            hits
-        })
-        .flatten_iter()
-        .collect();
-    pb.finish_and_clear();
-    output::write_text(&a.output, |w| {
+    let mut counter = progress::Counter::new(MIN_RAYS_FOR_BAR, "tracing", "rays");
+    let mut count = 0u64;
+    // Streamed: a batch of rays is read, traced in parallel and written, then the next, so
+    // memory stays bounded for any number of rays. A bad line stops the run, and the staged
+    // output is then dropped: nothing is written.
+    outs.write_with(out, |w| -> Result<()> {
         writeln!(w, "{HITS_HEADER}")?;
-        for h in &hits {
-            writeln!(w, "{},{},{},{}", h.uv.x, h.uv.y, h.depth, h.fetches)?;
+        let mut batch: Vec<Ray> = Vec::with_capacity(BATCH);
+        loop {
+            batch.clear();
+            for ray in rays.by_ref().take(BATCH) {
+                batch.push(ray?);
+            }
+            if batch.is_empty() {
+                break;
+            }
+            let hits: Vec<Hit> = batch
+                .par_chunks(CHUNK)
+                .flat_map_iter(|chunk| chunk.iter().map(|ray| trace(&surface, ray, a.technique, &params)))
+                .collect();
+            for h in &hits {
+                writeln!(w, "{},{},{},{}", h.uv.x, h.uv.y, h.depth, h.fetches)?;
+            }
+            count += hits.len() as u64;
+            counter.inc(hits.len() as u64);
         }
         Ok(())
     })?;
+    counter.finish();
+    outs.commit()?;
     if !output::is_stdout(&a.output) {
-        eprintln!("wrote {} ({} rays, {})", a.output.display(), hits.len(), a.technique);
+        eprintln!("wrote {} ({count} rays, {})", a.output.display(), a.technique);
     }
     Ok(())
-}
-
-/// Reads a rays file (`-`: standard input).
-fn read_rays(path: &Path) -> Result<Vec<Ray>> {
-    if output::is_stdout(path) {
-        let mut text = String::new();
-        std::io::stdin().read_to_string(&mut text).context("cannot read rays from standard input")?;
-        return parse_rays(&text, "<stdin>");
-    }
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read rays file {}", path.display()))?;
-    let text = String::from_utf8(bytes)
-        .map_err(|e| anyhow::anyhow!("{}: not UTF-8 text (byte {})", path.display(), e.utf8_error().valid_up_to()))?;
-    parse_rays(&text, &path.display().to_string())
-}
-
-/// Parses the text of a rays file called `name` (for messages): the header `u,v,dx,dy,dz`, then
-/// one ray per line. Blank lines are skipped; every other problem is an error naming the line.
-pub fn parse_rays(text: &str, name: &str) -> Result<Vec<Ray>> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut lines = text.lines().enumerate();
-    let expected = RAYS_HEADER.join(",");
-    let Some((_, header)) = lines.next() else {
-        bail!("{name} is empty: expected the header line {expected}");
-    };
-    if !header.split(',').map(str::trim).eq(RAYS_HEADER) {
-        bail!("{name}: line 1: the header is '{}', expected '{expected}'", header.trim());
-    }
-    let mut rays = Vec::new();
-    for (i, line) in lines {
-        let n = i + 1;
-        if line.trim().is_empty() {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').collect();
-        if fields.len() != RAYS_HEADER.len() {
-            bail!("{name}: line {n}: expected 5 values ({expected}), found {}", fields.len());
-        }
-        let mut v = [0.0f32; 5];
-        for ((slot, text), column) in v.iter_mut().zip(&fields).zip(RAYS_HEADER) {
-            let text = text.trim();
-            let x: f32 =
-                text.parse().map_err(|_| anyhow::anyhow!("{name}: line {n}: {column} '{text}' is not a number"))?;
-            if !x.is_finite() {
-                bail!("{name}: line {n}: {column} '{text}' is not finite (values must be finite numbers)");
-            }
-            *slot = x;
-        }
-        rays.push(Ray::new(Vec2::new(v[0], v[1]), Vec3::new(v[2], v[3], v[4])));
-    }
-    Ok(rays)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn parses_rays_and_reports_bad_lines() {
-        let rays = parse_rays("\u{feff}u, v,dx,dy,dz\r\n0.5,0.25,1,0,-1\r\n\r\n1e-3,2,0,-0.5,-2\n", "r.csv").unwrap();
-        assert_eq!(rays.len(), 2);
-        assert_eq!(rays[1], Ray::new(Vec2::new(1e-3, 2.0), Vec3::new(0.0, -0.5, -2.0)));
-        assert!(parse_rays("u,v,dx,dy,dz\n", "r.csv").unwrap().is_empty());
-        let err = |t: &str| parse_rays(t, "r.csv").unwrap_err().to_string();
-        assert!(err("").contains("r.csv is empty"));
-        assert!(err("u,v,dz\n").contains("line 1"));
-        assert!(err("u,v,dx,dy,dz\n0,0,0,0,-1\n0,0,1,-1\n").contains("line 3: expected 5 values"));
-        let e = err("u,v,dx,dy,dz\n0,0,0,0,-1\n0,0,x,0,-1\n");
-        assert!(e.contains("line 3") && e.contains("dx 'x' is not a number"), "{e}");
-        assert!(err("u,v,dx,dy,dz\n0,NaN,0,0,-1\n").contains("line 2: v 'NaN' is not finite"));
-        assert!(err("u,v,dx,dy,dz\n0,0,0,1e39,-1\n").contains("dy '1e39' is not finite"));
-        assert!(err("u,v,dx,dy,dz\n0,0,0,0,-inf\n").contains("line 2"));
-    }
 }

@@ -105,8 +105,21 @@ impl FromStr for Pattern {
 /// Deterministic: the same arguments always give the same field.
 #[must_use]
 pub fn generate(pattern: Pattern, width: u32, height: u32) -> HeightField {
+    generate_with_progress(pattern, width, height, &|_| {})
+}
+
+/// [`generate`], calling `progress(rows)` as each batch of `rows` rows is done (from the
+/// worker threads, in no particular order; the calls add up to the height). Rows are computed
+/// in parallel; the values are [`generate`]'s.
+#[must_use]
+pub fn generate_with_progress(
+    pattern: Pattern,
+    width: u32,
+    height: u32,
+    progress: &(dyn Fn(u32) + Sync),
+) -> HeightField {
     let (w, h) = (width.max(1), height.max(1));
-    let heights = per_texel(w, h, |x, y| {
+    let heights = per_texel(w, h, progress, |x, y| {
         let (u, v) = texel_uv(x, y, w, h);
         match pattern {
             Pattern::Bricks => bricks(u, v).height,
@@ -128,8 +141,19 @@ pub fn generate(pattern: Pattern, width: u32, height: u32) -> HeightField {
 /// plate, waves deep to pale blue by height, and the spike an orange texel on light grey.
 #[must_use]
 pub fn albedo(pattern: Pattern, width: u32, height: u32) -> Vec<[u8; 3]> {
+    albedo_with_progress(pattern, width, height, &|_| {})
+}
+
+/// [`albedo`], calling `progress(rows)` as rows are done (see [`generate_with_progress`]).
+#[must_use]
+pub fn albedo_with_progress(
+    pattern: Pattern,
+    width: u32,
+    height: u32,
+    progress: &(dyn Fn(u32) + Sync),
+) -> Vec<[u8; 3]> {
     let (w, h) = (width.max(1), height.max(1));
-    per_texel(w, h, |x, y| {
+    per_texel(w, h, progress, |x, y| {
         let (u, v) = texel_uv(x, y, w, h);
         let rgb = match pattern {
             Pattern::Bricks => bricks_albedo(u, v),
@@ -152,13 +176,20 @@ pub fn albedo(pattern: Pattern, width: u32, height: u32) -> Vec<[u8; 3]> {
     })
 }
 
-/// Evaluates `f(x, y)` at every texel, rows in parallel; row-major result.
-fn per_texel<T: Send + Copy + Default>(w: u32, h: u32, f: impl Fn(u32, u32) -> T + Sync) -> Vec<T> {
+/// Evaluates `f(x, y)` at every texel, rows in parallel; row-major result. `progress(1)` is
+/// called after each row.
+fn per_texel<T: Send + Copy + Default>(
+    w: u32,
+    h: u32,
+    progress: &(dyn Fn(u32) + Sync),
+    f: impl Fn(u32, u32) -> T + Sync,
+) -> Vec<T> {
     let mut out = vec![T::default(); w as usize * h as usize];
     out.par_chunks_mut(w as usize).enumerate().for_each(|(y, row)| {
         for (x, texel) in row.iter_mut().enumerate() {
             *texel = f(x as u32, y as u32);
         }
+        progress(1);
     });
     out
 }
@@ -837,6 +868,23 @@ mod tests {
             assert!((gu - fu).abs() < 2e-2 && (gv - fv).abs() < 2e-2, "({u}, {v})");
         }
         assert!((waves_gradient(0.0, 0.0).0 - PI * 2.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn progress_counts_every_row_once_and_changes_no_value() {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        for p in Pattern::ALL {
+            let rows = AtomicU32::new(0);
+            let tick = |n: u32| {
+                rows.fetch_add(n, Ordering::Relaxed);
+            };
+            let field = generate_with_progress(p, 37, 23, &tick);
+            assert_eq!(rows.load(Ordering::Relaxed), 23, "{p:?}");
+            assert_eq!(field.depths(), generate(p, 37, 23).depths(), "{p:?}");
+            rows.store(0, Ordering::Relaxed);
+            assert_eq!(albedo_with_progress(p, 37, 23, &tick), albedo(p, 37, 23), "{p:?}");
+            assert_eq!(rows.load(Ordering::Relaxed), 23, "{p:?}");
+        }
     }
 
     #[test]

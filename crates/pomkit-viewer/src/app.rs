@@ -66,12 +66,16 @@ struct Saved {
 
 const STORAGE_KEY: &str = "pomkit-viewer";
 
+/// Where screenshot mode leaves its result: the window's picture, or why there is none.
+pub type ScreenshotOutcome = Arc<Mutex<Option<Result<Arc<ColorImage>, String>>>>;
+
 /// A request to save the window to a PNG once the view is complete, then close.
 pub struct ScreenshotJob {
     /// Where.
     pub path: PathBuf,
-    /// What happened (read by `run` after the window closes).
-    pub outcome: Arc<Mutex<Option<Result<(), String>>>>,
+    /// What happened (read by `run` after the window closes): the window's picture, which
+    /// `run` writes to `path` only once the window has closed without error, or why not.
+    pub outcome: ScreenshotOutcome,
     /// Give up after this long.
     pub timeout: Duration,
 }
@@ -770,7 +774,7 @@ impl ViewerApp {
     fn screenshot_step(&mut self, ctx: &egui::Context) {
         let complete = self.complete() || (self.error.is_some() && self.shown.is_some());
         let Some((job, state, started)) = &mut self.shot else { return };
-        let finish = |job: &ScreenshotJob, r: Result<(), String>| {
+        let finish = |job: &ScreenshotJob, r: Result<Arc<ColorImage>, String>| {
             if let Ok(mut o) = job.outcome.lock() {
                 *o = Some(r);
             }
@@ -809,10 +813,10 @@ impl ViewerApp {
             ShotState::Requested(slot) => {
                 let img = slot.lock().ok().and_then(|mut s| s.take());
                 if let Some(img) = img {
-                    let result = save_color_image(&img, &job.path);
-                    let result = match (&self.error, result) {
-                        (Some(e), Ok(())) => Err(format!("the view shows an error: {e}")),
-                        (_, r) => r,
+                    // Not written here: a run that fails afterwards must leave no file.
+                    let result = match &self.error {
+                        Some(e) => Err(format!("the view shows an error: {e}")),
+                        None => Ok(img),
                     };
                     finish(job, result);
                     *state = ShotState::Done;
@@ -858,12 +862,6 @@ fn heat_legend(ui: &mut Ui, scale: f32) {
         ui.add_space((ui.available_width() - 40.0).max(0.0));
         ui.small(format!("{scale:.0}"));
     });
-}
-
-/// Saves an egui screenshot as an RGB PNG (atomically).
-fn save_color_image(img: &ColorImage, path: &Path) -> Result<(), String> {
-    let [w, h] = img.size;
-    crate::view::write_rgb_png(path, w as u32, h as u32, img.as_raw())
 }
 
 impl eframe::App for ViewerApp {

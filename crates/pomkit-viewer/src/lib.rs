@@ -12,7 +12,7 @@ pub mod panel;
 pub mod view;
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
 use eframe::egui;
@@ -75,17 +75,23 @@ fn display_hint() -> &'static str {
 /// screenshot mode, when the screenshot could not be taken or written.
 pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
     let doc = opts.scene.as_deref().map(SceneDoc::open).transpose()?;
-    if let Some(p) = &opts.screenshot {
-        pomkit_io::check_output(p, pomkit_io::PixelLayout::Rgb8)?;
-        let folder = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
-        if !folder.is_dir() {
-            return Err(ViewerError::Screenshot {
-                path: p.clone(),
-                reason: format!("its folder {} does not exist", folder.display()),
-            });
+    // The screenshot is checked before the window opens (its folder, read-only, not a file
+    // the scene reads) and written only once the whole run has succeeded.
+    let mut outs = pomkit_io::output::Outputs::new();
+    let shot_out = match &opts.screenshot {
+        Some(p) => {
+            pomkit_io::check_output(p, pomkit_io::PixelLayout::Rgb8)?;
+            if let Some(scene) = &opts.scene {
+                outs.input(scene);
+                pomkit_io::scene::scene_inputs(scene).unwrap_or_default().into_iter().for_each(|f| outs.input(f));
+            }
+            let id = outs.output(p);
+            outs.check()?;
+            Some(id)
         }
-    }
-    let outcome: Arc<Mutex<Option<Result<(), String>>>> = Arc::default();
+        None => None,
+    };
+    let outcome: app::ScreenshotOutcome = Arc::default();
     let shot = opts.screenshot.clone().map(|path| app::ScreenshotJob {
         path,
         outcome: outcome.clone(),
@@ -118,10 +124,15 @@ pub fn run(opts: ViewerOptions) -> Result<(), ViewerError> {
         }),
     )
     .map_err(|e| ViewerError::Window(e.to_string()))?;
-    if let Some(path) = opts.screenshot {
+    if let (Some(path), Some(id)) = (opts.screenshot, shot_out) {
         let result = outcome.lock().ok().and_then(|mut o| o.take());
         match result {
-            Some(Ok(())) => {}
+            Some(Ok(img)) => {
+                let [w, h] = img.size;
+                let rgb: Vec<u8> = img.as_raw().chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+                outs.write_image(id, w as u32, h as u32, pomkit_io::PixelLayout::Rgb8, pomkit_io::Pixels::U8(&rgb))?;
+                outs.commit()?;
+            }
             Some(Err(reason)) => return Err(ViewerError::Screenshot { path, reason }),
             None => {
                 return Err(ViewerError::Screenshot {
