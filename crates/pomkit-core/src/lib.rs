@@ -35,6 +35,7 @@ pub mod accuracy;
 pub mod bake;
 pub mod demo;
 pub mod heightfield;
+pub mod memory;
 pub mod mesh;
 pub mod procedural;
 pub mod pyramid;
@@ -46,6 +47,7 @@ pub mod trace;
 
 pub use glam;
 pub use heightfield::{EdgeMode, HeightField, HeightFieldError, MipChain, mip_level_from_gradients};
+pub use memory::MAX_SIZE;
 pub use pyramid::MaxHeightPyramid;
 pub use shadow::{Shadow, ShadowMode, ShadowParams, lod_weight, shadow};
 pub use tangent::{TangentError, TangentMethod, TangentOptions, compute_tangents, compute_vertex_normals};

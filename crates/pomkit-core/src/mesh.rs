@@ -41,6 +41,7 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::heightfield::{EdgeMode, HeightField};
+use crate::memory::MemoryError;
 use crate::tangent::{TangentError, TangentMethod, TangentOptions, compute_tangents, compute_vertex_normals};
 
 /// The most segments (per direction) a shape constructor makes; larger requests are clamped.
@@ -395,9 +396,14 @@ impl Mesh {
     ///
     /// A `depth_scale` that is NaN, infinite or not positive displaces nothing. Triangles that
     /// use one vertex twice are dropped.
+    ///
+    /// Like any allocation, this aborts the process when memory runs out; renderers use
+    /// [`Mesh::try_displaced_for_shading`], which returns an error instead, after checking
+    /// [`Mesh::displaced_bounds`] against the memory budget.
     #[must_use]
     pub fn displaced(&self, field: &HeightField, edges: EdgeMode, depth_scale: f32, max_edge_texels: f32) -> Mesh {
         self.displaced_capped(field, edges, depth_scale, max_edge_texels, MAX_DISPLACED_TRIANGLES, true)
+            .unwrap_or_else(|_| std::alloc::handle_alloc_error(std::alloc::Layout::new::<Vec3>()))
     }
 
     /// As [`Mesh::displaced`], but the normals and tangents stay those of the *undisplaced*
@@ -413,6 +419,65 @@ impl Mesh {
         max_edge_texels: f32,
     ) -> Mesh {
         self.displaced_capped(field, edges, depth_scale, max_edge_texels, MAX_DISPLACED_TRIANGLES, false)
+            .unwrap_or_else(|_| std::alloc::handle_alloc_error(std::alloc::Layout::new::<Vec3>()))
+    }
+
+    /// [`Mesh::displaced_for_shading`], with the output's buffers allocated fallibly.
+    ///
+    /// # Errors
+    /// [`MemoryError::Allocation`] when the subdivided mesh cannot be allocated.
+    pub fn try_displaced_for_shading(
+        &self,
+        field: &HeightField,
+        edges: EdgeMode,
+        depth_scale: f32,
+        max_edge_texels: f32,
+    ) -> Result<Mesh, MemoryError> {
+        self.displaced_capped(field, edges, depth_scale, max_edge_texels, MAX_DISPLACED_TRIANGLES, false)
+    }
+
+    /// Upper bounds on the triangles and vertices that [`Mesh::displaced`] (and
+    /// [`Mesh::displaced_for_shading`]) make of this mesh for a `field_width x field_height`
+    /// height field, computed without building anything: every triangle becomes at most `n^2`
+    /// triangles and adds at most `n^2` vertices, `n` being the most parts of its three edges,
+    /// and the total is held below [`MAX_DISPLACED_TRIANGLES`] as `displaced` does.
+    #[must_use]
+    pub fn displaced_bounds(&self, field_width: u32, field_height: u32, max_edge_texels: f32) -> (u64, u64) {
+        let max_edge = f64::from(if max_edge_texels.is_nan() { 1.0 } else { max_edge_texels.max(MIN_EDGE_TEXELS) });
+        let texels = DVec2::new(f64::from(field_width), f64::from(field_height));
+        let n_vertices = self.positions.len();
+        let uv = |i: u32| self.uvs.get(i as usize).copied().unwrap_or(Vec2::ZERO).as_dvec2();
+        let mut sum = 0u64;
+        let mut input = 0u64;
+        for t in self.indices.chunks_exact(3) {
+            if t.iter().any(|&i| i as usize >= n_vertices) {
+                continue;
+            }
+            input += 1;
+            let parts = |p: u32, q: u32| {
+                let l = ((uv(q) - uv(p)) * texels).length();
+                if l.is_finite() { (l / max_edge).ceil().clamp(1.0, f64::from(MAX_EDGE_PARTS)) as u64 } else { 1 }
+            };
+            let n = parts(t[0], t[1]).max(parts(t[0], t[2])).max(parts(t[1], t[2]));
+            sum = sum.saturating_add(n * n);
+        }
+        let tris = if sum <= MAX_DISPLACED_TRIANGLES { sum } else { MAX_DISPLACED_TRIANGLES.max(input) };
+        (tris, n_vertices as u64 + tris)
+    }
+
+    /// Bytes of a mesh of `vertices` vertices and `triangles` triangles (positions, normals,
+    /// UVs, tangents, `uv_scale` and indices).
+    #[must_use]
+    pub fn bytes_for(vertices: u64, triangles: u64) -> u64 {
+        let per_vertex =
+            std::mem::size_of::<Vec3>() * 2 + std::mem::size_of::<Vec2>() * 2 + std::mem::size_of::<Vec4>();
+        vertices.saturating_mul(per_vertex as u64).saturating_add(triangles.saturating_mul(12))
+    }
+
+    /// Bytes of this mesh's buffers ([`Mesh::bytes_for`] its vertices and triangles).
+    #[must_use]
+    pub fn bytes(&self) -> u64 {
+        Mesh::bytes_for(self.positions.len() as u64, self.triangle_count() as u64)
     }
 
     fn displaced_capped(
@@ -423,13 +488,13 @@ impl Mesh {
         max_edge_texels: f32,
         max_triangles: u64,
         geometric_normals: bool,
-    ) -> Mesh {
+    ) -> Result<Mesh, MemoryError> {
         let mesh = self.repaired();
         let mesh = mesh.as_ref();
         let depth_scale = if depth_scale.is_finite() && depth_scale > 0.0 { depth_scale } else { 0.0 };
         let max_edge = if max_edge_texels.is_nan() { 1.0 } else { max_edge_texels.max(MIN_EDGE_TEXELS) };
         let plan = SubdivisionPlan::new(mesh, field.size_f32().as_dvec2(), f64::from(max_edge), max_triangles);
-        let (mut out, interpolated_normals) = plan.build(mesh);
+        let (mut out, interpolated_normals) = plan.build(mesh)?;
 
         // Displacement: along -N by depth * depth_scale * L world units.
         let ds = f64::from(depth_scale);
@@ -446,7 +511,7 @@ impl Mesh {
             interpolated_normals
         };
         out.tangents.par_iter_mut().zip(&out.normals).for_each(|(t, &n)| *t = fix_tangent(*t, n));
-        out
+        Ok(out)
     }
 
     /// A flat grid in the XZ plane, centred on the origin, facing +Y: `size.x` along X (u
@@ -966,14 +1031,28 @@ impl SubdivisionPlan {
 
     /// The subdivided, undisplaced mesh (normals interpolated, tangents not yet orthogonalized),
     /// and a copy of its interpolated normals.
-    fn build(&self, mesh: &Mesh) -> (Mesh, Vec<Vec3>) {
+    fn build(&self, mesh: &Mesh) -> Result<(Mesh, Vec<Vec3>), MemoryError> {
+        // Every buffer is reserved once, at its final size, fallibly: the sizes come from input.
+        let (tris, verts) = Self::totals(mesh.positions.len(), &self.triangle_edges, &self.parts);
+        let fail = |e: std::collections::TryReserveError| MemoryError::Allocation {
+            what: format!("the displaced mesh ({tris} triangles, {verts} vertices)"),
+            bytes: Mesh::bytes_for(verts, tris),
+            reason: e.to_string(),
+            advice: "use a smaller height map or a coarser --technique than displaced".into(),
+        };
+        fn reserved<T: Clone>(from: &[T], n: u64) -> Result<Vec<T>, std::collections::TryReserveError> {
+            let mut v = Vec::new();
+            v.try_reserve_exact(usize::try_from(n).unwrap_or(usize::MAX).max(from.len()))?;
+            v.extend_from_slice(from);
+            Ok(v)
+        }
         let mut out = Mesh {
-            positions: mesh.positions.clone(),
-            normals: mesh.normals.clone(),
-            uvs: mesh.uvs.clone(),
-            tangents: mesh.tangents.clone(),
-            uv_scale: mesh.uv_scale.clone(),
-            indices: Vec::new(),
+            positions: reserved(&mesh.positions, verts).map_err(fail)?,
+            normals: reserved(&mesh.normals, verts).map_err(fail)?,
+            uvs: reserved(&mesh.uvs, verts).map_err(fail)?,
+            tangents: reserved(&mesh.tangents, verts).map_err(fail)?,
+            uv_scale: reserved(&mesh.uv_scale, verts).map_err(fail)?,
+            indices: reserved(&[], tris.saturating_mul(3)).map_err(fail)?,
         };
         // Edge vertices, from lo to hi, computed from the edge's end points only.
         let mut edge_base = Vec::with_capacity(self.edges.len());
@@ -1035,8 +1114,8 @@ impl SubdivisionPlan {
                 }
             }
         }
-        let normals = out.normals.clone();
-        (out, normals)
+        let normals = reserved(&out.normals, 0).map_err(fail)?;
+        Ok((out, normals))
     }
 }
 
@@ -1804,22 +1883,22 @@ mod tests {
     fn displacement_is_capped_and_never_nan() {
         let field = HeightField::from_height_fn(512, 512, |x, y| ((x ^ y) & 15) as f32 / 15.0);
         let sphere = Mesh::uv_sphere(1.0, 8, 12);
-        let capped = sphere.displaced_capped(&field, EdgeMode::Wrap, 0.1, 0.25, 20_000, true);
+        let capped = sphere.displaced_capped(&field, EdgeMode::Wrap, 0.1, 0.25, 20_000, true).unwrap();
         assert_valid(&capped);
         assert!(capped.triangle_count() <= 20_000 && capped.triangle_count() > 15_000, "{}", capped.triangle_count());
         // More triangles than the cap to begin with: copied, not subdivided.
-        let tiny = sphere.displaced_capped(&field, EdgeMode::Wrap, 0.1, 0.25, 10, true);
+        let tiny = sphere.displaced_capped(&field, EdgeMode::Wrap, 0.1, 0.25, 10, true).unwrap();
         assert_eq!(tiny.triangle_count(), sphere.triangle_count());
         // Bad parameters: no displacement, finest/one-texel subdivision.
         for ds in [f32::NAN, -1.0, 0.0, f32::INFINITY] {
-            let m = sphere.displaced_capped(&field, EdgeMode::Clamp, ds, f32::NAN, 50_000, true);
+            let m = sphere.displaced_capped(&field, EdgeMode::Clamp, ds, f32::NAN, 50_000, true).unwrap();
             assert_valid(&m);
             for (p, n) in m.positions.iter().zip(&m.normals) {
                 assert!(p.length() <= 1.0 + 1e-5 && n.dot(p.normalize()) > 0.8, "{p} {n}");
             }
         }
         // A huge depth scale saturates instead of overflowing.
-        assert_valid(&sphere.displaced_capped(&field, EdgeMode::Clamp, 1e38, 64.0, 50_000, true));
+        assert_valid(&sphere.displaced_capped(&field, EdgeMode::Clamp, 1e38, 64.0, 50_000, true).unwrap());
         // An inconsistent mesh (edited fields) is repaired, not a panic.
         let mut broken = Mesh::quad(Vec2::ONE);
         broken.indices.extend([0, 1, 9]);

@@ -4,6 +4,7 @@
 
 use glam::{Vec2, Vec3};
 
+use crate::memory::{MAX_SIZE, MemoryError, try_vec};
 use crate::scene::Scene;
 use crate::trace::Technique;
 
@@ -121,14 +122,16 @@ impl Mode {
     }
 }
 
-/// The checks every renderer makes before drawing, in this order: the image size (1 to 16384
-/// pixels a side), every object's material index, every material's trace parameters.
+/// The checks every renderer makes before drawing, in this order: the image size (1 to
+/// [`MAX_SIZE`] pixels a side), every object's material index, every material's trace
+/// parameters, and that the camera and geometry can be drawn in f32
+/// ([`Scene::check_drawable`]). (The memory a frame needs is checked by each renderer, which knows its buffers.)
 ///
 /// # Errors
 /// The first [`RenderError`] found.
 pub fn validate(scene: &Scene, opts: &RenderOptions) -> Result<(), RenderError> {
     let (w, h) = (opts.width, opts.height);
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+    if w == 0 || h == 0 || w > MAX_SIZE || h > MAX_SIZE {
         return Err(RenderError::Size { width: w, height: h });
     }
     for obj in &scene.objects {
@@ -143,6 +146,7 @@ pub fn validate(scene: &Scene, opts: &RenderOptions) -> Result<(), RenderError> 
     for m in &scene.materials {
         m.trace.validate().map_err(|e| RenderError::Params { material: m.name.clone(), reason: e.to_string() })?;
     }
+    scene.check_drawable()?;
     Ok(())
 }
 
@@ -150,7 +154,7 @@ pub fn validate(scene: &Scene, opts: &RenderOptions) -> Result<(), RenderError> 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum RenderError {
     /// Width or height is 0 or too large.
-    #[error("image size {width}x{height} is not allowed: each side must be 1 to 16384 pixels")]
+    #[error("image size {width}x{height} is not allowed: each side must be 1 to {MAX_SIZE} pixels")]
     Size {
         /// Requested width.
         width: u32,
@@ -167,6 +171,10 @@ pub enum RenderError {
         /// Materials in the scene.
         count: usize,
     },
+    /// The camera or an object lies where f32 cannot draw it
+    /// ([`Scene::check_drawable`](crate::scene::Scene::check_drawable)).
+    #[error(transparent)]
+    Drawable(#[from] crate::scene::DrawableError),
     /// A material's trace parameters are invalid.
     #[error("material \"{material}\": {reason}")]
     Params {
@@ -175,6 +183,9 @@ pub enum RenderError {
         /// What is wrong.
         reason: String,
     },
+    /// The frame will not fit in the memory there is (see [`crate::memory`]).
+    #[error(transparent)]
+    Memory(#[from] MemoryError),
 }
 
 /// A shaded sample: colour, depth and AOV values.
@@ -198,33 +209,67 @@ pub struct Sample {
 
 /// Averages `ss x ss` supersamples per pixel (samples are `(w ss) x (h ss)`, row-major), fills
 /// uncovered samples with `background`, and collects the AOVs when `aovs`.
-#[must_use]
-pub fn resolve(samples: &[Option<Sample>], w: u32, h: u32, ss: u32, background: Vec3, aovs: bool) -> RenderOutput {
-    let sw = w * ss;
+///
+/// # Errors
+/// [`MemoryError::Allocation`] when the output buffers cannot be allocated.
+pub fn resolve(
+    samples: &[Option<Sample>],
+    w: u32,
+    h: u32,
+    ss: u32,
+    background: Vec3,
+    aovs: bool,
+) -> Result<RenderOutput, MemoryError> {
+    let (mut color, mut a) = output_buffers(w, h, aovs)?;
+    let rows =
+        AovRows { uv: &mut a.uv, depth: &mut a.depth, shadow: &mut a.shadow, fetches: &mut a.fetches, lod: &mut a.lod };
+    let covered = resolve_rows(samples, w, ss, background, &mut color, aovs.then_some(rows));
+    Ok(RenderOutput { width: w, height: h, color, aovs: aovs.then_some(a), covered })
+}
+
+/// Rows of the AOV buffers that [`resolve_rows`] fills.
+#[derive(Debug)]
+pub struct AovRows<'a> {
+    /// Rows of [`Aovs::uv`].
+    pub uv: &'a mut [Vec2],
+    /// Rows of [`Aovs::depth`].
+    pub depth: &'a mut [f32],
+    /// Rows of [`Aovs::shadow`].
+    pub shadow: &'a mut [f32],
+    /// Rows of [`Aovs::fetches`].
+    pub fetches: &'a mut [f32],
+    /// Rows of [`Aovs::lod`].
+    pub lod: &'a mut [f32],
+}
+
+/// [`resolve`] for a band of `color.len() / w` whole pixel rows, whose samples (`ss` sample rows
+/// per pixel row, `w ss` samples each) are `samples`: writes the colour (and the AOVs, when
+/// given) of those rows and returns how many of their pixels are covered.
+pub fn resolve_rows(
+    samples: &[Option<Sample>],
+    w: u32,
+    ss: u32,
+    background: Vec3,
+    color: &mut [Vec3],
+    mut aovs: Option<AovRows<'_>>,
+) -> usize {
+    let sw = (w * ss) as usize;
+    let (w, ss) = (w as usize, ss as usize);
     let n = (ss * ss) as f32;
-    let mut color = vec![Vec3::ZERO; (w * h) as usize];
-    let mut a = Aovs::default();
-    if aovs {
-        a.uv = vec![Vec2::ZERO; (w * h) as usize];
-        a.depth = vec![0.0; (w * h) as usize];
-        a.shadow = vec![0.0; (w * h) as usize];
-        a.fetches = vec![0.0; (w * h) as usize];
-        a.lod = vec![0.0; (w * h) as usize];
-    }
+    let h = color.len() / w.max(1);
     let mut covered = 0;
     for y in 0..h {
         for x in 0..w {
-            let i = (y * w + x) as usize;
+            let i = y * w + x;
             let mut acc = Vec3::ZERO;
             let mut any = false;
             for sy in 0..ss {
                 for sx in 0..ss {
-                    let s = samples[((y * ss + sy) * sw + x * ss + sx) as usize];
-                    match s {
+                    match samples[(y * ss + sy) * sw + x * ss + sx] {
                         Some(s) => {
                             any = true;
                             acc += if s.color.is_finite() { s.color } else { Vec3::ZERO };
-                            if aovs {
+                            if let Some(a) = aovs.as_mut() {
                                 a.uv[i] += s.uv / n;
                                 a.depth[i] += s.depth / n;
                                 a.shadow[i] += s.shadow / n;
@@ -240,5 +285,39 @@ pub fn resolve(samples: &[Option<Sample>], w: u32, h: u32, ss: u32, background: 
             color[i] = acc / n;
         }
     }
-    RenderOutput { width: w, height: h, color, aovs: aovs.then_some(a), covered }
+    covered
+}
+
+/// The colour buffer and (when `aovs`) the AOV buffers of a `w x h` frame, allocated fallibly.
+///
+/// # Errors
+/// [`MemoryError::Allocation`] naming the buffer.
+pub fn output_buffers(w: u32, h: u32, aovs: bool) -> Result<(Vec<Vec3>, Aovs), MemoryError> {
+    let n = w as usize * h as usize;
+    let fail = |what: &'static str, bytes: usize| {
+        move |e: std::collections::TryReserveError| MemoryError::Allocation {
+            what: format!("the {w}x{h} frame's {what}"),
+            bytes: bytes as u64,
+            reason: e.to_string(),
+            advice: "use a smaller --size or fewer AOVs".into(),
+        }
+    };
+    let color = try_vec(Vec3::ZERO, n).map_err(fail("colour buffer", n * 12))?;
+    let mut a = Aovs::default();
+    if aovs {
+        a.uv = try_vec(Vec2::ZERO, n).map_err(fail("uv AOV", n * 8))?;
+        a.depth = try_vec(0.0, n).map_err(fail("depth AOV", n * 4))?;
+        a.shadow = try_vec(0.0, n).map_err(fail("shadow AOV", n * 4))?;
+        a.fetches = try_vec(0.0, n).map_err(fail("fetches AOV", n * 4))?;
+        a.lod = try_vec(0.0, n).map_err(fail("lod AOV", n * 4))?;
+    }
+    Ok((color, a))
+}
+
+/// Bytes of a `w x h` frame's [`RenderOutput`]: colour and, when `aovs`, every AOV.
+#[must_use]
+pub fn output_bytes(w: u32, h: u32, aovs: bool) -> u64 {
+    let px = u64::from(w) * u64::from(h);
+    let per = std::mem::size_of::<Vec3>() + if aovs { std::mem::size_of::<Vec2>() + 4 * 4 } else { 0 };
+    px * per as u64
 }

@@ -37,7 +37,10 @@ use pomkit_core::trace::{Ray, Surface, Technique, TraceParams, trace};
 use pomkit_core::{EdgeMode, mip_level_from_gradients};
 use rayon::prelude::*;
 
-pub use pomkit_core::render::{Aovs, Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve, validate};
+pub use pomkit_core::memory::{Estimate, MemoryError};
+pub use pomkit_core::render::{
+    Aovs, Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve, resolve_rows, validate,
+};
 
 use raster::{ClipVertex, Fragment, ScreenTriangle, Varyings, clip_near, setup};
 
@@ -85,8 +88,13 @@ impl CpuRenderer {
 
     /// Renders `scene`, calling `progress(done, total)` as tiles finish.
     ///
+    /// Before allocating anything big it checks [`estimate`] against the memory budget
+    /// ([`pomkit_core::memory`]), and the buffers whose size comes from the options or the scene
+    /// are allocated fallibly.
+    ///
     /// # Errors
-    /// [`RenderError`] for a bad size, a dangling material index or invalid trace parameters.
+    /// [`RenderError`] for a bad size, a dangling material index, invalid trace parameters, or
+    /// a frame that does not fit in memory ([`RenderError::Memory`]).
     pub fn render(
         &mut self,
         scene: &Scene,
@@ -97,10 +105,21 @@ impl CpuRenderer {
         let ss = opts.supersample.clamp(1, 8);
         let (w, h) = (opts.width, opts.height);
         let (sw, sh) = (w * ss, h * ss);
+        estimate(scene, opts).check(|| describe_job(opts), &advice(scene, opts))?;
         let prepared = prepare(scene, opts);
-        let triangles = self.triangles(scene, &prepared, opts, sw, sh);
-        let samples = shade_tiles(scene, &prepared, &triangles, sw, sh, opts.lod_tint, progress);
-        Ok(resolve(&samples, w, h, ss, scene.background, opts.aovs))
+        let triangles = self.triangles(scene, &prepared, opts, sw, sh)?;
+        let (mut color, mut aovs) = pomkit_core::render::output_buffers(w, h, opts.aovs)?;
+        let covered = shade_bands(
+            scene,
+            &prepared,
+            &triangles,
+            (w, h, ss),
+            &mut color,
+            opts.aovs.then_some(&mut aovs),
+            opts.lod_tint,
+            progress,
+        )?;
+        Ok(RenderOutput { width: w, height: h, color, aovs: opts.aovs.then_some(aovs), covered })
     }
 
     /// The vertex stage and triangle setup for every object.
@@ -111,16 +130,28 @@ impl CpuRenderer {
         opts: &RenderOptions,
         sw: u32,
         sh: u32,
-    ) -> Vec<ScreenTriangle> {
+    ) -> Result<Vec<ScreenTriangle>, MemoryError> {
         let aspect = sw as f32 / sh as f32;
         let vp = scene.camera.projection(aspect) * scene.camera.view();
+        let (tris, _) = geometry_counts(scene, opts);
         let mut out = Vec::new();
+        out.try_reserve_exact(usize::try_from(tris).unwrap_or(usize::MAX)).map_err(|e| MemoryError::Allocation {
+            what: format!("the triangle list ({tris} triangles)"),
+            bytes: pomkit_core::memory::bytes_of::<ScreenTriangle>(tris),
+            reason: e.to_string(),
+            advice: advice(scene, opts),
+        })?;
         for (oi, obj) in scene.objects.iter().enumerate() {
             let prep = &prepared[obj.material];
             let mesh: Arc<Mesh> = match (opts.mode, &prep.material.height) {
                 (Mode::Displaced, Some(field)) => {
                     let p = &prep.params;
-                    Arc::new(obj.mesh.displaced_for_shading(field, p.edges, p.depth_scale, opts.displaced_edge_texels))
+                    Arc::new(obj.mesh.try_displaced_for_shading(
+                        field,
+                        p.edges,
+                        p.depth_scale,
+                        opts.displaced_edge_texels,
+                    )?)
                 }
                 _ => obj.mesh.clone(),
             };
@@ -159,8 +190,108 @@ impl CpuRenderer {
                 }
             }
         }
-        out
+        Ok(out)
     }
+}
+
+/// Upper bounds on the triangles the vertex stage makes of `scene` (displaced meshes
+/// subdivided, see [`Mesh::displaced_bounds`]) and on the vertices of its largest object.
+fn geometry_counts(scene: &Scene, opts: &RenderOptions) -> (u64, u64) {
+    let mut tris = 0u64;
+    let mut largest = 0u64;
+    for obj in &scene.objects {
+        let field = scene.materials.get(obj.material).and_then(|m| m.height.as_ref());
+        let (t, v) = match (opts.mode, field) {
+            (Mode::Displaced, Some(f)) => obj.mesh.displaced_bounds(f.width(), f.height(), opts.displaced_edge_texels),
+            _ => (obj.mesh.triangle_count() as u64, obj.mesh.positions.len() as u64),
+        };
+        tris = tris.saturating_add(t);
+        largest = largest.max(v);
+    }
+    (tris, largest)
+}
+
+/// What a render is, for messages: "render of 16384x16384 with AOVs".
+fn describe_job(opts: &RenderOptions) -> String {
+    let mut s = format!("render of {}x{}", opts.width, opts.height);
+    if opts.supersample > 1 {
+        s += &format!(" with {0}x{0} supersampling", opts.supersample.min(8));
+    }
+    if opts.aovs {
+        s += " with AOVs";
+    }
+    if opts.mode == Mode::Displaced {
+        s += " of displaced geometry";
+    }
+    s
+}
+
+/// What to change when a render does not fit.
+fn advice(scene: &Scene, opts: &RenderOptions) -> String {
+    let mut ways = vec!["a smaller --size"];
+    if opts.supersample > 1 {
+        ways.push("a lower --supersample");
+    }
+    if opts.aovs {
+        ways.push("fewer AOVs");
+    }
+    if opts.mode == Mode::Displaced {
+        ways.push("smaller height maps or a technique other than displaced");
+    }
+    if scene.objects.iter().map(|o| o.mesh.triangle_count() as u64).sum::<u64>() > 1_000_000 {
+        ways.push("fewer or coarser meshes");
+    }
+    let last = ways.pop().unwrap_or_default();
+    if ways.is_empty() { format!("use {last}") } else { format!("use {} or {last}", ways.join(", ")) }
+}
+
+/// Bytes per height-map texel a prepared material holds: the surface (a copy of the field, its
+/// mip chain, the maximum-height pyramid, the parallax map and its mips, and the normals baked on
+/// the way) and the baked normal map.
+const HEIGHT_BYTES_PER_TEXEL: u64 = 80;
+
+/// Bytes per albedo texel: the texture and its mip chain (4/3 of it) of linear RGB.
+const ALBEDO_BYTES_PER_TEXEL: u64 = 16;
+
+/// An upper bound on the memory [`CpuRenderer::render`] allocates for `scene` with `opts`
+/// (beyond the scene itself), by part: the output frame (colour, AOVs, and an 8-bit copy for
+/// the PNG), the sample bands in flight, the triangle list and its tile bins, the largest
+/// object's vertex stage (its displaced mesh, its world-space copy and clip-space vertices),
+/// and the prepared materials (surfaces, normal maps, albedo mips).
+#[must_use]
+pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
+    use pomkit_core::memory::bytes_of;
+    let ss = u64::from(opts.supersample.clamp(1, 8));
+    let (w, h) = (u64::from(opts.width), u64::from(opts.height));
+    let mut e = Estimate::default();
+    e.add("frame", pomkit_core::render::output_bytes(opts.width, opts.height, opts.aovs));
+    e.add("frame: 8-bit copy for the PNG", w * h * 6);
+    // Bands of BAND pixel rows: their samples, and the tiles being shaded into them.
+    let threads = rayon::current_num_threads() as u64 + 1;
+    let band = bytes_of::<Option<Sample>>(w * ss * u64::from(BAND) * ss);
+    e.add(
+        "sample bands",
+        threads.saturating_mul(2).saturating_mul(band).min(2 * bytes_of::<Option<Sample>>(w * h * ss * ss)),
+    );
+    let (tris, largest) = geometry_counts(scene, opts);
+    let tiles = (w * ss).div_ceil(u64::from(TILE)) * (h * ss).div_ceil(u64::from(TILE));
+    e.add("triangles", bytes_of::<ScreenTriangle>(tris));
+    e.add("triangles: tile bins", tris.saturating_mul(8).saturating_add(tiles * 32));
+    let displaced = opts.mode == Mode::Displaced;
+    // The largest object's meshes and clip-space vertices (its triangles are counted above).
+    let per_vertex = Mesh::bytes_for(1, 0) * if displaced { 3 } else { 1 } + bytes_of::<ClipVertex>(1);
+    let per_triangle = if displaced { 12 * 2 } else { 12 };
+    e.add("vertex stage", largest.saturating_mul(per_vertex).saturating_add(largest.saturating_mul(2 * per_triangle)));
+    let mut materials = 0u64;
+    for m in &scene.materials {
+        if let Some(f) = &m.height {
+            materials += u64::from(f.width()) * u64::from(f.height()) * HEIGHT_BYTES_PER_TEXEL;
+        }
+        let albedo = m.albedo.as_ref().map_or(1, |t| u64::from(t.width()) * u64::from(t.height()));
+        materials += albedo * ALBEDO_BYTES_PER_TEXEL;
+    }
+    e.add("materials", materials);
+    e
 }
 
 /// Prepares every material (after [`validate`]): surfaces for tracing, normal maps (baked when
@@ -199,20 +330,34 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
         .collect()
 }
 
-/// Bins triangles into tiles and shades tiles in parallel; returns the full-resolution samples.
-fn shade_tiles(
+/// Pixel rows per band: each band's samples are shaded (tile by tile, in parallel) and
+/// resolved into its rows of the frame, so the full-resolution samples never exist at once.
+const BAND: u32 = TILE;
+
+/// Bins triangles into tiles, shades the tiles of each band of [`BAND`] pixel rows in parallel
+/// and resolves each band into `color` (and `aovs`); returns the covered pixel count.
+#[expect(clippy::too_many_arguments, reason = "the frame's buffers and the shading inputs")]
+fn shade_bands(
     scene: &Scene,
     prepared: &[Prepared],
     tris: &[ScreenTriangle],
-    w: u32,
-    h: u32,
+    (w, h, ss): (u32, u32, u32),
+    color: &mut [Vec3],
+    aovs: Option<&mut Aovs>,
     lod_tint: bool,
     progress: &(dyn Fn(usize, usize) + Sync),
-) -> Vec<Option<Sample>> {
-    let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
-    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); (tx * ty) as usize];
+) -> Result<usize, MemoryError> {
+    let (sw, sh) = (w * ss, h * ss);
+    let (tx, ty) = (sw.div_ceil(TILE), sh.div_ceil(TILE));
+    let mut bins: Vec<Vec<u32>> =
+        pomkit_core::memory::try_vec(Vec::new(), (tx * ty) as usize).map_err(|e| MemoryError::Allocation {
+            what: format!("the tile bins of a {sw}x{sh}-sample frame"),
+            bytes: u64::from(tx * ty) * 24,
+            reason: e.to_string(),
+            advice: "use a smaller --size or a lower --supersample".into(),
+        })?;
     for (i, t) in tris.iter().enumerate() {
-        let Some((x0, y0, x1, y1)) = t.quad_bounds(0, 0, w, h) else { continue };
+        let Some((x0, y0, x1, y1)) = t.quad_bounds(0, 0, sw, sh) else { continue };
         for by in y0 / TILE..=(y1 - 1) / TILE {
             for bx in x0 / TILE..=(x1 - 1) / TILE {
                 bins[(by * tx + bx) as usize].push(i as u32);
@@ -220,56 +365,109 @@ fn shade_tiles(
         }
     }
     // Front to back, so the early depth test rejects hidden fragments before they are traced.
-    for b in &mut bins {
-        b.sort_by(|&a, &c| tris[a as usize].min_z.total_cmp(&tris[c as usize].min_z));
-    }
+    bins.par_iter_mut().for_each(|b| b.sort_by(|&a, &c| tris[a as usize].min_z.total_cmp(&tris[c as usize].min_z)));
     let done = AtomicUsize::new(0);
     let total = bins.len();
-    let tiles: Vec<(u32, u32, Vec<Option<Sample>>)> = bins
-        .par_iter()
-        .enumerate()
-        .map(|(k, bin)| {
-            let (bx, by) = (k as u32 % tx, k as u32 / tx);
-            let (x0, y0) = (bx * TILE, by * TILE);
-            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-            let tw = x1 - x0;
-            let mut buf: Vec<Option<Sample>> = vec![None; (tw * (y1 - y0)) as usize];
-            for &ti in bin {
-                let tri = &tris[ti as usize];
-                let obj = &scene.objects[tri.object as usize];
-                let prep = &prepared[obj.material];
-                tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
-                    let slot = &mut buf[((f.y - y0) * tw + (f.x - x0)) as usize];
-                    // Early depth test with the polygon's depth: the displaced depth is never
-                    // nearer, so a fragment behind the stored one stays behind.
-                    if slot.is_some_and(|s| s.z <= f.z) {
-                        return;
+    // The frame's rows, cut into bands of BAND rows (AOV rows too, when asked for).
+    let band_px = (w * BAND) as usize;
+    let mut outs: Vec<(&mut [Vec3], Option<pomkit_core::render::AovRows<'_>>)> = Vec::new();
+    match aovs {
+        Some(a) => {
+            let mut uv = a.uv.chunks_mut(band_px);
+            let mut depth = a.depth.chunks_mut(band_px);
+            let mut shadow = a.shadow.chunks_mut(band_px);
+            let mut fetches = a.fetches.chunks_mut(band_px);
+            let mut lod = a.lod.chunks_mut(band_px);
+            for c in color.chunks_mut(band_px) {
+                let rows = match (uv.next(), depth.next(), shadow.next(), fetches.next(), lod.next()) {
+                    (Some(uv), Some(depth), Some(shadow), Some(fetches), Some(lod)) => {
+                        Some(pomkit_core::render::AovRows { uv, depth, shadow, fetches, lod })
                     }
-                    let mut s = shade(scene, prep, f);
-                    if lod_tint && prep.surface.is_some() {
-                        let w = lod_weight(s.lod, prep.material.lod_threshold);
-                        let tint = Vec3::new(1.0, 0.25, 0.2).lerp(Vec3::new(0.25, 1.0, 0.3), w);
-                        s.color = s.color * 0.5 + tint * 0.5 * s.color.length().max(0.05);
-                    }
-                    if slot.is_none_or(|old| s.z < old.z) {
-                        *slot = Some(s);
-                    }
-                });
+                    _ => None,
+                };
+                outs.push((c, rows));
             }
-            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-            progress(n, total);
-            (x0, y0, buf)
-        })
-        .collect();
-    let mut out = vec![None; (w * h) as usize];
-    for (x0, y0, buf) in tiles {
-        let tw = (x0 + TILE).min(w) - x0;
-        for (i, s) in buf.into_iter().enumerate() {
-            let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
-            out[(y * w + x) as usize] = s;
         }
+        None => outs.extend(color.chunks_mut(band_px).map(|c| (c, None))),
     }
-    out
+    let background = scene.background;
+    let covered: Result<usize, MemoryError> = outs
+        .into_par_iter()
+        .enumerate()
+        .map(|(k, (color, rows))| {
+            let rows_px = (color.len() / w as usize) as u32;
+            let (sy0, sy1) = (k as u32 * BAND * ss, (k as u32 * BAND + rows_px) * ss);
+            let mut samples = pomkit_core::memory::try_vec(None, (sw * (sy1 - sy0)) as usize).map_err(|e| {
+                MemoryError::Allocation {
+                    what: format!("a band of {sw}x{} samples", sy1 - sy0),
+                    bytes: pomkit_core::memory::bytes_of::<Option<Sample>>(u64::from(sw * (sy1 - sy0))),
+                    reason: e.to_string(),
+                    advice: "use a smaller --size or a lower --supersample".into(),
+                }
+            })?;
+            let tiles: Vec<(u32, u32, Vec<Option<Sample>>)> = (sy0 / TILE..sy1.div_ceil(TILE))
+                .flat_map(|by| (0..tx).map(move |bx| (bx, by)))
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map(|(bx, by)| {
+                    let buf =
+                        shade_tile(scene, prepared, tris, &bins[(by * tx + bx) as usize], (bx, by), (sw, sh), lod_tint);
+                    let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                    progress(n, total);
+                    (bx * TILE, by * TILE, buf)
+                })
+                .collect();
+            for (x0, y0, buf) in tiles {
+                let tw = ((x0 + TILE).min(sw) - x0) as usize;
+                for (r, line) in buf.chunks(tw).enumerate() {
+                    let y = y0 as usize + r - sy0 as usize;
+                    let at = y * sw as usize + x0 as usize;
+                    samples[at..at + tw].copy_from_slice(line);
+                }
+            }
+            Ok(resolve_rows(&samples, w, ss, background, color, rows))
+        })
+        .sum();
+    covered
+}
+
+/// Shades tile `(bx, by)` of a `sw x sh`-sample frame: its samples, row-major.
+fn shade_tile(
+    scene: &Scene,
+    prepared: &[Prepared],
+    tris: &[ScreenTriangle],
+    bin: &[u32],
+    (bx, by): (u32, u32),
+    (sw, sh): (u32, u32),
+    lod_tint: bool,
+) -> Vec<Option<Sample>> {
+    let (x0, y0) = (bx * TILE, by * TILE);
+    let (x1, y1) = ((x0 + TILE).min(sw), (y0 + TILE).min(sh));
+    let tw = x1 - x0;
+    let mut buf: Vec<Option<Sample>> = vec![None; (tw * (y1 - y0)) as usize];
+    for &ti in bin {
+        let tri = &tris[ti as usize];
+        let obj = &scene.objects[tri.object as usize];
+        let prep = &prepared[obj.material];
+        tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
+            let slot = &mut buf[((f.y - y0) * tw + (f.x - x0)) as usize];
+            // Early depth test with the polygon's depth: the displaced depth is never
+            // nearer, so a fragment behind the stored one stays behind.
+            if slot.is_some_and(|s| s.z <= f.z) {
+                return;
+            }
+            let mut s = shade(scene, prep, f);
+            if lod_tint && prep.surface.is_some() {
+                let w = lod_weight(s.lod, prep.material.lod_threshold);
+                let tint = Vec3::new(1.0, 0.25, 0.2).lerp(Vec3::new(0.25, 1.0, 0.3), w);
+                s.color = s.color * 0.5 + tint * 0.5 * s.color.length().max(0.05);
+            }
+            if slot.is_none_or(|old| s.z < old.z) {
+                *slot = Some(s);
+            }
+        });
+    }
+    buf
 }
 
 /// The fragment stage.
@@ -382,4 +580,68 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Sample {
         }
     }
     Sample { color, z, uv: hit_uv, depth: hit_depth, shadow: vis, fetches: fetches as f32, lod }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pomkit_core::demo::demo_scene_sized;
+
+    /// The bytes a [`RenderOutput`]'s buffers hold, from their lengths and element sizes.
+    fn output_buffer_bytes(out: &RenderOutput) -> u64 {
+        let mut bytes = out.color.len() * std::mem::size_of::<Vec3>();
+        if let Some(a) = &out.aovs {
+            bytes += a.uv.len() * 8 + (a.depth.len() + a.shadow.len() + a.fetches.len() + a.lod.len()) * 4;
+        }
+        bytes as u64
+    }
+
+    #[test]
+    fn the_frame_estimate_bounds_the_real_output_within_2x() {
+        let scene = demo_scene_sized(32);
+        for (aovs, ss) in [(false, 1), (true, 1), (true, 3)] {
+            let opts = RenderOptions { width: 48, height: 20, aovs, supersample: ss, ..Default::default() };
+            let out = CpuRenderer::new().render(&scene, &opts, &|_, _| {}).unwrap();
+            let real = output_buffer_bytes(&out);
+            // 12 bytes a pixel of colour, 24 more with the AOVs: 48 * 20 * 36 = 34,560.
+            assert_eq!(real, 48 * 20 * if aovs { 36 } else { 12 });
+            let est = estimate(&scene, &opts);
+            let frame = est.part("frame");
+            assert!(frame >= real && frame <= 2 * real, "frame estimate {frame} against {real} bytes");
+            // The samples of one band in flight are at least a band's worth of Option<Sample>.
+            let band = 48 * u64::from(ss) * u64::from(BAND.min(20)) * u64::from(ss) * 44;
+            assert!(est.part("sample bands") >= band, "{est:?}");
+            assert!(est.total() >= frame + est.part("triangles"));
+        }
+    }
+
+    #[test]
+    fn the_displaced_estimate_bounds_the_real_meshes_within_2x() {
+        let scene = demo_scene_sized(32);
+        let opts = RenderOptions { width: 48, height: 20, mode: Mode::Displaced, ..Default::default() };
+        let (bound_tris, bound_verts) = geometry_counts(&scene, &opts);
+        let (mut tris, mut largest) = (0u64, 0u64);
+        for obj in &scene.objects {
+            let m = &scene.materials[obj.material];
+            let mesh = match &m.height {
+                Some(f) => {
+                    let p = m.trace.sanitized();
+                    obj.mesh.try_displaced_for_shading(f, p.edges, p.depth_scale, opts.displaced_edge_texels).unwrap()
+                }
+                None => (*obj.mesh).clone(),
+            };
+            tris += mesh.indices.len() as u64 / 3;
+            largest = largest.max(mesh.positions.len() as u64);
+        }
+        assert!(bound_tris >= tris && bound_tris <= 2 * tris, "{bound_tris} against {tris} triangles");
+        assert!(bound_verts >= largest && bound_verts <= 3 * largest, "{bound_verts} against {largest} vertices");
+        let est = estimate(&scene, &opts);
+        assert_eq!(
+            est.part("triangles") - est.part("triangles: tile bins"),
+            bound_tris * std::mem::size_of::<ScreenTriangle>() as u64
+        );
+        // And the render itself works.
+        let out = CpuRenderer::new().render(&scene, &opts, &|_, _| {}).unwrap();
+        assert!(out.covered > 0);
+    }
 }

@@ -57,7 +57,13 @@ impl GpuContext {
         if timestamps {
             features |= wgpu::Features::TIMESTAMP_QUERY;
         }
-        let limits = wgpu::Limits::default().using_resolution(adapter.limits());
+        // The adapter's own texture and buffer size limits (wgpu's defaults are 8192 texels and
+        // 256 MiB), so that every frame the adapter can hold can be drawn and read back.
+        let supported = adapter.limits();
+        let limits = wgpu::Limits {
+            max_buffer_size: supported.max_buffer_size,
+            ..wgpu::Limits::default().using_resolution(supported)
+        };
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("pomkit"),

@@ -129,10 +129,15 @@ impl GpuRenderer {
         let ss = opts.supersample.clamp(1, 8);
         let (w, h) = (opts.width, opts.height);
         let (sw, sh) = (w * ss, h * ss);
-        let limit = self.ctx.device.limits().max_texture_dimension_2d;
-        if sw > limit || sh > limit {
-            return Err(GpuError::TooLarge { what: "render target".into(), width: sw, height: sh, limit }.into());
-        }
+        // Before creating anything: the device's limits, then the memory the frame needs.
+        check_frame(&self.ctx.device.limits(), w, h, ss)?;
+        let host = frame_host_bytes(w, h, ss, opts.aovs);
+        pomkit_core::memory::check(
+            || format!("render of {w}x{h} on the GPU"),
+            host,
+            "use a smaller --size, a lower --supersample, or --backend cpu (which needs less)",
+        )
+        .map_err(|e| GpuError::Unsupported(e.to_string()))?;
         let ctx = &self.ctx;
         let frame = FrameUniforms::new(ctx, &self.pipelines);
         frame.write(ctx, &scene.camera, sw as f32 / sh as f32, &scene.lights, scene.ambient, opts.lod_tint)?;
@@ -152,7 +157,17 @@ impl GpuRenderer {
             let displaced = opts.mode == Mode::Displaced && m.height.is_some();
             let mesh = match (displaced, &m.height) {
                 (true, Some(field)) => {
-                    obj.mesh.displaced_for_shading(field, p.edges, p.depth_scale, opts.displaced_edge_texels)
+                    let (tris, verts) =
+                        obj.mesh.displaced_bounds(field.width(), field.height(), opts.displaced_edge_texels);
+                    pomkit_core::memory::check(
+                        || format!("the displaced mesh of object \"{}\"", obj.name),
+                        pomkit_core::mesh::Mesh::bytes_for(verts, tris).saturating_mul(3),
+                        "use smaller height maps, a technique other than displaced, or --backend cpu",
+                    )
+                    .map_err(|e| GpuError::Unsupported(e.to_string()))?;
+                    obj.mesh
+                        .try_displaced_for_shading(field, p.edges, p.depth_scale, opts.displaced_edge_texels)
+                        .map_err(|e| GpuError::Unsupported(e.to_string()))?
                 }
                 _ => (*obj.mesh).clone(),
             };
@@ -161,6 +176,7 @@ impl GpuRenderer {
                 (Some(field), true) => Some(world.uvs.iter().map(|&uv| field.sample_bilinear(uv, p.edges)).collect()),
                 _ => None,
             };
+            check_mesh(&ctx.device.limits(), &obj.name, world.positions.len() as u64, world.indices.len() as u64)?;
             let gpu_mesh = GpuMesh::new(ctx, &world, depths.as_deref());
             objects.push((obj.material, gpu_mesh, GpuObject::new(ctx, &self.pipelines, Mat4::IDENTITY)));
         }
@@ -335,8 +351,90 @@ impl GpuRenderer {
             .collect();
         timings.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         self.timings = timings;
-        Ok(resolve(&samples, w, h, ss, scene.background, gs.aovs))
+        Ok(resolve(&samples, w, h, ss, scene.background, gs.aovs).map_err(RenderError::from)?)
     }
+}
+
+/// Bytes per sample of a GPU frame's render targets (colour `Rgba16Float`, the two AOV targets
+/// and `Depth32Float`).
+const TARGET_BYTES_PER_SAMPLE: u64 = 8 + 16 + 8 + 4;
+
+/// Bytes per texel of the largest readback (the first AOV target, `Rgba32Float`).
+const LARGEST_READBACK_TEXEL: u32 = 16;
+
+/// Bytes per vertex of a [`GpuMesh`]'s vertex buffer (15 floats: position, normal, tangent, uv,
+/// uv scale, depth).
+const VERTEX_BYTES: u64 = 15 * 4;
+
+/// Checks a `w x h` frame with `ss x ss` supersampling against the device's `limits` before
+/// anything is created: the render targets against `max_texture_dimension_2d`, and the
+/// readback buffers against `max_buffer_size`.
+///
+/// # Errors
+/// [`GpuError::Unsupported`] saying which limit, by how much, and what to do: a smaller
+/// `--size` (the largest that fits), a lower `--supersample`, or `--backend cpu`.
+pub fn check_frame(limits: &wgpu::Limits, w: u32, h: u32, ss: u32) -> Result<(), GpuError> {
+    let ss = ss.max(1);
+    let (sw, sh) = (u64::from(w) * u64::from(ss), u64::from(h) * u64::from(ss));
+    let dim = u64::from(limits.max_texture_dimension_2d);
+    let supersampled =
+        if ss > 1 { format!(" with {ss}x{ss} supersampling ({sw}x{sh} samples)") } else { String::new() };
+    let lower = if ss > 1 { ", a lower --supersample" } else { "" };
+    if sw > dim || sh > dim {
+        let largest = dim / u64::from(ss);
+        return Err(GpuError::Unsupported(format!(
+            "a {w}x{h} frame{supersampled} is larger than this GPU's limit of {dim} texels per side \
+             (max_texture_dimension_2d): use a smaller --size (at most {largest}x{largest}){lower}, or --backend cpu"
+        )));
+    }
+    let align = u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let row = (sw * u64::from(LARGEST_READBACK_TEXEL)).div_ceil(align) * align;
+    let bytes = row * sh;
+    if bytes > limits.max_buffer_size {
+        let fmt = pomkit_core::memory::format_bytes;
+        // The largest square frame whose readback fits.
+        let side = ((limits.max_buffer_size / u64::from(LARGEST_READBACK_TEXEL)) as f64).sqrt() as u64 / u64::from(ss);
+        return Err(GpuError::Unsupported(format!(
+            "a {w}x{h} frame{supersampled} needs a readback buffer of {}, over this GPU's max_buffer_size of {}: \
+             use a smaller --size (about {side}x{side} at most){lower}, or --backend cpu",
+            fmt(bytes),
+            fmt(limits.max_buffer_size)
+        )));
+    }
+    Ok(())
+}
+
+/// Checks an object's vertex and index buffers (`vertices` vertices, `indices` indices)
+/// against the device's `max_buffer_size` before they are created.
+///
+/// # Errors
+/// [`GpuError::Unsupported`] naming the object, the buffer's size and the limit.
+pub fn check_mesh(limits: &wgpu::Limits, object: &str, vertices: u64, indices: u64) -> Result<(), GpuError> {
+    let fmt = pomkit_core::memory::format_bytes;
+    for (what, bytes) in [("vertex", vertices * VERTEX_BYTES), ("index", indices * 4)] {
+        if bytes > limits.max_buffer_size {
+            return Err(GpuError::Unsupported(format!(
+                "object \"{object}\" needs a {what} buffer of {} ({vertices} vertices, {} triangles), over this \
+                 GPU's max_buffer_size of {}: use a coarser mesh (or a technique other than displaced), or --backend cpu",
+                fmt(bytes),
+                indices / 3,
+                fmt(limits.max_buffer_size)
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// An upper bound on the host memory a GPU frame takes beyond the scene: the render targets and
+/// a readback buffer (host memory on a software adapter such as lavapipe), the read-back texels
+/// as floats, the samples, and the output frame with an 8-bit copy for the PNG.
+#[must_use]
+pub fn frame_host_bytes(w: u32, h: u32, ss: u32, aovs: bool) -> u64 {
+    let samples = u64::from(w) * u64::from(h) * u64::from(ss.max(1)).pow(2);
+    let readback = 16 + 2 * 16; // the largest readback buffer and its bytes, while converting
+    let floats = 3 * 16; // the three targets read back as four floats per sample
+    let per_sample = TARGET_BYTES_PER_SAMPLE + readback + floats + std::mem::size_of::<Option<Sample>>() as u64;
+    samples.saturating_mul(per_sample) + pomkit_core::render::output_bytes(w, h, aovs) + u64::from(w) * u64::from(h) * 6
 }
 
 /// A scene uploaded to the GPU ([`GpuRenderer::prepare`]), drawn by [`GpuRenderer::draw`].
@@ -389,5 +487,31 @@ impl GpuScene {
     #[must_use]
     pub fn materials(&self) -> &[GpuMaterial] {
         &self.materials
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_over_the_limits_are_refused_with_what_to_do() {
+        let limits = wgpu::Limits { max_texture_dimension_2d: 8192, max_buffer_size: 256 << 20, ..Default::default() };
+        assert!(check_frame(&limits, 1280, 720, 1).is_ok());
+        // 8193 is one texel over the texture limit.
+        let err = check_frame(&limits, 8193, 16, 1).unwrap_err().to_string();
+        assert!(err.contains("8193x16 frame") && err.contains("limit of 8192"), "{err}");
+        assert!(err.contains("at most 8192x8192") && err.contains("--backend cpu"), "{err}");
+        let err = check_frame(&limits, 4097, 16, 2).unwrap_err().to_string();
+        assert!(err.contains("(8194x32 samples)") && err.contains("at most 4096x4096"), "{err}");
+        assert!(err.contains("a lower --supersample"), "{err}");
+        // 8192 x 8192 of Rgba32Float read back is 1 GiB: over 256 MiB.
+        let err = check_frame(&limits, 8192, 8192, 1).unwrap_err().to_string();
+        assert!(err.contains("readback buffer of 1.0 GiB") && err.contains("max_buffer_size of 256.0 MiB"), "{err}");
+        assert!(err.contains("about 4096x4096 at most"), "{err}");
+        assert!(check_frame(&limits, 4096, 4096, 1).is_ok());
+        let err = check_mesh(&limits, "ball", 5_000_000, 30_000_000).unwrap_err().to_string();
+        assert!(err.contains("object \"ball\"") && err.contains("vertex buffer of 286.1 MiB"), "{err}");
+        assert!(check_mesh(&limits, "ball", 1000, 3000).is_ok());
     }
 }

@@ -471,7 +471,7 @@ fn unknown_names_list_the_choices() {
     let err = load_err(&with("material", "albedo = \"builtin:marble\""));
     assert_names(&err, &["albedo", "marble", "bricks, pyramids"]);
     let err = load_err(&with("material", "albedo = \"builtin:bricks:0x5\""));
-    assert_names(&err, &["albedo", "0x5", "8192"]);
+    assert_names(&err, &["albedo", "0x5", "16384"]);
     let err = load_err(&with("top", "").replace("mesh = \"quad\"", "mesh = \"pyramid\""));
     assert_names(&err, &["object 2 (\"wall\")", "mesh \"pyramid\"", "sphere", ".gltf"]);
 }
