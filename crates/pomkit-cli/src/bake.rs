@@ -6,6 +6,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use pomkit_core::bake::{self, NormalBakeOptions, NormalFilter};
 use pomkit_core::{EdgeMode, HeightField};
+use pomkit_io::output::{OutputId, Outputs};
 use pomkit_io::{PixelLayout, Pixels};
 
 use crate::HeightInput;
@@ -24,7 +25,9 @@ pub enum BakeVerb {
 /// Options shared by every map derived from slopes.
 #[derive(Args, Debug, Clone)]
 pub struct SlopeArgs {
-    /// Lengyel's s: the full height range spans this many texel widths. Larger is steeper.
+    /// Lengyel's s: the full height range spans this many texel widths. Larger is steeper; 0
+    /// gives flat normals (every texel +Z); a negative scale inverts the relief (reads the map
+    /// as depth). At most 1e18 in magnitude, beyond which the normals overflow f32.
     #[arg(long, default_value_t = 8.0, allow_negative_numbers = true)]
     scale: f32,
     /// Slope filter: central differences (sharp) or the 3x3 Sobel operator (smoother).
@@ -138,15 +141,33 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
     }
 }
 
-/// Loads the input and checks the options before any heavy work, so a bad flag fails fast.
-fn prepare(input: &HeightInput, opts: &NormalBakeOptions, output: &Path, layout: PixelLayout) -> Result<HeightField> {
+/// Checks the output and the options, then loads the input, before any heavy work, so a bad
+/// flag or output fails fast. The output is staged in the returned [`Outputs`] (which refuses
+/// to overwrite the input) and appears only when the caller commits it.
+fn prepare(
+    input: &HeightInput,
+    opts: &NormalBakeOptions,
+    output: &Path,
+    layout: PixelLayout,
+) -> Result<(HeightField, Outputs, OutputId)> {
     pomkit_io::check_output(output, layout)?;
-    if !opts.scale.is_finite() {
-        anyhow::bail!("--scale {}: the scale must be a finite number of texel widths", opts.scale);
+    if !(opts.scale.is_finite() && opts.scale.abs() <= bake::MAX_SCALE) {
+        anyhow::bail!(
+            "--scale {}: the scale must be a finite number of texel widths from -{max:e} to {max:e} (beyond \
+             that the normals overflow f32)",
+            pomkit_core::scene::short_number(opts.scale),
+            max = bake::MAX_SCALE
+        );
     }
+    let mut outs = Outputs::new();
+    if !input.input.starts_with("builtin:") {
+        outs.input(&input.input);
+    }
+    let id = outs.output(output);
+    outs.check()?;
     let field = input.load()?;
     opts.validate(&field).with_context(|| format!("cannot bake {}", input.input))?;
-    Ok(field)
+    Ok((field, outs, id))
 }
 
 fn normal(a: &NormalArgs) -> Result<()> {
@@ -155,7 +176,7 @@ fn normal(a: &NormalArgs) -> Result<()> {
         NormalEncoding::Rgb8 | NormalEncoding::Rg8 => PixelLayout::Rgb8,
         NormalEncoding::Float => PixelLayout::RgbF32,
     };
-    let field = prepare(&a.input, &opts, &a.output, layout)?;
+    let (field, mut outs, id) = prepare(&a.input, &opts, &a.output, layout)?;
     let (w, h) = (field.width(), field.height());
     let pb = progress::bar(u64::from(h), u64::from(w), "baking");
     let tick = |rows: u32| pb.inc(u64::from(rows));
@@ -168,15 +189,16 @@ fn normal(a: &NormalArgs) -> Result<()> {
                 px.iter_mut().for_each(|p| p[2] = 0);
             }
             pb.finish_and_clear();
-            pomkit_io::write_image(&a.output, w, h, layout, Pixels::U8(px.as_flattened()))?;
+            outs.write_image(id, w, h, layout, Pixels::U8(px.as_flattened()))?;
         }
         NormalEncoding::Float => {
             let mut px = vec![[0.0f32; 3]; field.depths().len()];
             bake::bake_normals_into(&field, &opts, &mut px, |n| n.to_array(), &tick)?;
             pb.finish_and_clear();
-            pomkit_io::write_image(&a.output, w, h, layout, Pixels::F32(px.as_flattened()))?;
+            outs.write_image(id, w, h, layout, Pixels::F32(px.as_flattened()))?;
         }
     }
+    outs.commit()?;
     eprintln!("wrote {} ({w}x{h} normal map, {:?}, scale {})", a.output.display(), a.encoding, opts.scale);
     Ok(())
 }
@@ -187,28 +209,30 @@ fn parallax(a: &ParallaxArgs) -> Result<()> {
         ParallaxEncoding::R8 => PixelLayout::Gray8,
         ParallaxEncoding::Float => PixelLayout::GrayF32,
     };
-    let field = prepare(&a.input, &opts, &a.output, layout)?;
+    let (field, mut outs, id) = prepare(&a.input, &opts, &a.output, layout)?;
     let (w, h) = (field.width(), field.height());
     let values = bake::bake_parallax(&field, &opts)?;
     match a.encoding {
         ParallaxEncoding::R8 => {
             let px: Vec<u8> = values.iter().map(|&v| ((v * 0.5 + 0.5) * 255.0).round() as u8).collect();
-            pomkit_io::write_image(&a.output, w, h, layout, Pixels::U8(&px))?;
+            outs.write_image(id, w, h, layout, Pixels::U8(&px))?;
         }
-        ParallaxEncoding::Float => pomkit_io::write_image(&a.output, w, h, layout, Pixels::F32(&values))?,
+        ParallaxEncoding::Float => outs.write_image(id, w, h, layout, Pixels::F32(&values))?,
     }
+    outs.commit()?;
     eprintln!("wrote {} ({w}x{h} parallax map, {:?})", a.output.display(), a.encoding);
     Ok(())
 }
 
 fn pack(a: &PackArgs) -> Result<()> {
     let opts = a.slope.options(a.y_down);
-    let field = prepare(&a.input, &opts, &a.output, PixelLayout::Rgba8)?;
+    let (field, mut outs, id) = prepare(&a.input, &opts, &a.output, PixelLayout::Rgba8)?;
     let (w, h) = (field.width(), field.height());
     let pb = progress::bar(u64::from(h), u64::from(w), "baking");
     let px = bake::bake_packed_rgba8(&field, &opts, &|rows| pb.inc(u64::from(rows)))?;
     pb.finish_and_clear();
-    pomkit_io::write_image(&a.output, w, h, PixelLayout::Rgba8, Pixels::U8(px.as_flattened()))?;
+    outs.write_image(id, w, h, PixelLayout::Rgba8, Pixels::U8(px.as_flattened()))?;
+    outs.commit()?;
     eprintln!("wrote {} ({w}x{h} normal + height map)", a.output.display());
     Ok(())
 }

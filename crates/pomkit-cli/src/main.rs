@@ -167,11 +167,20 @@ impl HeightOption {
 /// Loads the height field `input` names (a file or `builtin:NAME[:WxH]`), read as `read` says.
 fn load_height(input: &str, read: &HeightRead) -> Result<HeightField> {
     if let Some(spec) = input.strip_prefix("builtin:") {
+        // As scene files do (docs/SCENES.md): these flags say how to read an image's values, and
+        // a built-in map has none to read. (--depth-map inverts it, as documented.)
+        if read.channel != ChannelArg::Luma {
+            let channel = Channel::from(read.channel);
+            bail!("--channel {channel} describes how to read a height image: it does not apply to {input}");
+        }
+        if read.normalize {
+            bail!("--normalize describes how to read a height image: it does not apply to {input}");
+        }
         let (name, size) = spec.split_once(':').unwrap_or((spec, "512x512"));
         let pattern: Pattern = name.parse().with_context(|| format!("input {input}"))?;
         let (w, h) = parse_size(size).with_context(|| format!("input {input}"))?;
-        let field = progress::spinner(u64::from(w) * u64::from(h), &format!("generating {name} {w}x{h}"), || {
-            procedural::generate(pattern, w, h)
+        let field = progress::rows(h, w, &format!("generating {name} {w}x{h}"), |tick| {
+            procedural::generate_with_progress(pattern, w, h, tick)
         });
         return Ok(if read.depth_map {
             // The builtin is a height map; read as depth it is inverted, as a file would be.
@@ -184,13 +193,13 @@ fn load_height(input: &str, read: &HeightRead) -> Result<HeightField> {
     Ok(pomkit_io::load_height_field(&PathBuf::from(input), &opts)?)
 }
 
-/// Parses `WxH` with both sides in 1..=16384.
+/// Parses `WxH` with both sides in 1..=[`pomkit_core::MAX_SIZE`] (16384).
 fn parse_size(s: &str) -> Result<(u32, u32)> {
     let (w, h) = s.split_once(['x', 'X']).with_context(|| format!("size '{s}' is not WxH, e.g. 512x512"))?;
     let parse = |v: &str| -> Result<u32> {
         let n: u32 = v.trim().parse().with_context(|| format!("size '{s}': '{v}' is not a whole number"))?;
-        if !(1..=16384).contains(&n) {
-            bail!("size '{s}': each side must be between 1 and 16384");
+        if !(1..=pomkit_core::MAX_SIZE).contains(&n) {
+            bail!("size '{s}': each side must be between 1 and {}", pomkit_core::MAX_SIZE);
         }
         Ok(n)
     };
@@ -201,7 +210,9 @@ fn parse_size(s: &str) -> Result<(u32, u32)> {
 struct GenerateArgs {
     /// bricks, pyramids, cobblestones, text, spike or waves.
     pattern: String,
-    /// Output height map (16-bit grey PNG, white = high).
+    /// Output height map (16-bit grey PNG, white = high). The outputs appear only when the whole
+    /// run succeeds and may not be read-only; a symbolic link is written through (the file it
+    /// points to is replaced, the link stays).
     #[arg(short, long)]
     output: PathBuf,
     /// Size in texels.
@@ -215,22 +226,85 @@ struct GenerateArgs {
 fn generate(args: &GenerateArgs) -> Result<()> {
     let pattern: Pattern = args.pattern.parse()?;
     let (w, h) = parse_size(&args.size)?;
+    // Every output is checked before the work and appears only when both are written.
+    pomkit_io::check_output(&args.output, PixelLayout::Gray16)?;
+    let mut outs = pomkit_io::output::Outputs::new();
+    let height_out = outs.output(&args.output);
+    let albedo_out = args.albedo.as_ref().map(|path| outs.output(path));
+    if let Some(path) = &args.albedo {
+        pomkit_io::check_output(path, PixelLayout::Rgb8)?;
+    }
+    outs.check()?;
+    let what = format!("{} {w}x{h}", pattern.name());
     let field =
-        progress::spinner(u64::from(w) * u64::from(h), &format!("generating {} {w}x{h}", pattern.name()), || {
-            procedural::generate(pattern, w, h)
-        });
+        progress::rows(h, w, &format!("height {what}"), |tick| procedural::generate_with_progress(pattern, w, h, tick));
     let samples: Vec<u16> = field.heights().iter().map(|&v| (v * 65535.0).round() as u16).collect();
-    pomkit_io::write_image(&args.output, w, h, PixelLayout::Gray16, Pixels::U16(&samples))?;
+    drop(field);
+    progress::spinner(u64::from(w) * u64::from(h), "encoding", || {
+        outs.write_image(height_out, w, h, PixelLayout::Gray16, Pixels::U16(&samples))
+    })?;
+    drop(samples);
+    if let Some(id) = albedo_out {
+        let rgb = progress::rows(h, w, &format!("colour {what}"), |tick| {
+            procedural::albedo_with_progress(pattern, w, h, tick)
+        });
+        progress::spinner(u64::from(w) * u64::from(h), "encoding", || {
+            outs.write_image(id, w, h, PixelLayout::Rgb8, Pixels::U8(rgb.as_flattened()))
+        })?;
+    }
+    outs.commit()?;
     eprintln!("wrote {} ({w}x{h} height map, {})", args.output.display(), pattern.name());
     if let Some(path) = &args.albedo {
-        let rgb: Vec<u8> = procedural::albedo(pattern, w, h).into_iter().flatten().collect();
-        pomkit_io::write_image(path, w, h, PixelLayout::Rgb8, Pixels::U8(&rgb))?;
         eprintln!("wrote {} (colour map)", path.display());
     }
     Ok(())
 }
 
+/// Gives the process a private runtime directory when `XDG_RUNTIME_DIR` is unset or not an
+/// absolute path to a directory: without one, Mesa's device-select Vulkan layer (through
+/// libwayland) prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment." twice
+/// on every GPU start, although nothing is wrong. The directory is
+/// `$TMPDIR/pomkit-runtime-UID`, mode 0700, created once and reused; when it cannot be made
+/// safely (not ours, not private, not a directory), the environment is left alone.
+#[cfg(unix)]
+#[expect(
+    unsafe_code,
+    reason = "std::env::set_var is unsafe in Rust 2024 because another thread may read the environment \
+              concurrently; this runs first thing in main, before pomkit or any library starts a thread"
+)]
+fn ensure_runtime_dir() {
+    let usable = std::env::var_os("XDG_RUNTIME_DIR").map(PathBuf::from).is_some_and(|d| d.is_absolute() && d.is_dir());
+    if usable {
+        return;
+    }
+    if let Some(dir) = private_runtime_dir() {
+        // SAFETY: single-threaded at this point (see the reason above); nothing holds a
+        // pointer into the environment.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir) };
+    }
+}
+
+#[cfg(not(unix))]
+fn ensure_runtime_dir() {}
+
+/// `$TMPDIR/pomkit-runtime-UID`, created with mode 0700 if absent; `None` unless it is a real
+/// directory (not a link) owned by this user and closed to everyone else.
+#[cfg(unix)]
+fn private_runtime_dir() -> Option<PathBuf> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+    let uid = std::fs::metadata("/proc/self").ok()?.uid();
+    let dir = std::env::temp_dir().join(format!("pomkit-runtime-{uid}"));
+    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(_) => return None,
+    }
+    let meta = std::fs::symlink_metadata(&dir).ok()?;
+    (meta.is_dir() && meta.uid() == uid && meta.permissions().mode() & 0o077 == 0 && dir.is_absolute()).then_some(dir)
+}
+
 fn main() -> ExitCode {
+    ensure_runtime_dir();
     let cli = Cli::parse();
     let result = match &cli.verb {
         Verb::Render(args) => render::run(args),

@@ -9,6 +9,7 @@ use pomkit_core::trace::Technique;
 use pomkit_cpu::compose::{self, Image};
 use pomkit_cpu::{CpuRenderer, Mode, RenderOptions, RenderOutput};
 use pomkit_gpu::{GpuRenderError, GpuRenderer};
+use pomkit_io::output::{OutputId, Outputs};
 use pomkit_io::{PixelLayout, Pixels};
 
 use crate::backend::{self, Backend, Opened};
@@ -19,7 +20,9 @@ pub struct RenderArgs {
     /// Scene file (TOML; see docs/SCENES.md). Without one, the built-in demo scene: bricks,
     /// pyramids, cobblestones and raised text on a plane, a cube and a sphere.
     scene: Option<PathBuf>,
-    /// Output PNG. AOVs go beside it as OUT.<name>.exr.
+    /// Output PNG. AOVs go beside it as OUT.<name>.exr. Every output appears only when the whole
+    /// run succeeds, may not be a file the scene reads, and may not be read-only; a symbolic
+    /// link is written through (the file it points to is replaced, the link stays).
     #[arg(short, long, default_value = "pomkit.png")]
     output: PathBuf,
     /// Use this technique on every material (flat, normal, parallax, iterative, steep,
@@ -54,12 +57,13 @@ pub struct RenderArgs {
     lod_tint: bool,
 }
 
-/// A technique name or `displaced`.
-fn parse_mode(name: &str) -> Result<Mode> {
+/// A technique name or `displaced`, given to `flag` (`--technique` or `--compare`), which an
+/// error names.
+fn parse_mode(name: &str, flag: &str) -> Result<Mode> {
     if name.eq_ignore_ascii_case("displaced") {
         return Ok(Mode::Displaced);
     }
-    let t: Technique = name.parse().map_err(|e| anyhow::anyhow!("--technique: {e}, displaced"))?;
+    let t: Technique = name.parse().map_err(|e| anyhow::anyhow!("{flag}: {e}, displaced"))?;
     Ok(Mode::Technique(t))
 }
 
@@ -76,12 +80,30 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         bail!("--supersample {}: must be 1 to 8", a.supersample);
     }
     let mode = match &a.technique {
-        Some(t) => parse_mode(t)?,
+        Some(t) => parse_mode(t, "--technique")?,
         None => Mode::Material,
     };
     let modes: Vec<(String, Mode)> =
-        a.compare.iter().map(|n| Ok((n.to_ascii_lowercase(), parse_mode(n)?))).collect::<Result<_>>()?;
+        a.compare.iter().map(|n| Ok((n.to_ascii_lowercase(), parse_mode(n, "--compare")?))).collect::<Result<_>>()?;
     pomkit_io::check_output(&a.output, PixelLayout::Rgb8)?;
+    // Every output (the PNG and its AOVs) is checked before any work, may not be a file the
+    // scene reads, and appears only when the whole run succeeds.
+    let mut outs = Outputs::new();
+    if let Some(path) = &a.scene {
+        for input in pomkit_io::scene::scene_inputs(path)? {
+            outs.input(input);
+        }
+    }
+    let png = outs.output(&a.output);
+    let mut aov_outputs: Vec<(String, OutputId)> = Vec::new();
+    if modes.is_empty() {
+        for name in &a.aov {
+            if !aov_outputs.iter().any(|(n, _)| n == name) {
+                aov_outputs.push((name.clone(), outs.output(aov_path(&a.output, name))));
+            }
+        }
+    }
+    outs.check()?;
     let scene = match &a.scene {
         Some(path) => pomkit_io::scene::load_scene(path)?,
         None => pomkit_core::demo::demo_scene(),
@@ -98,11 +120,16 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     };
     if modes.is_empty() {
         let out = renderer.render(&scene, &base, "rendering")?;
-        write_png(&a.output, &image_of(&out))?;
-        if let Some(aovs) = &out.aovs {
-            write_aovs(&a.output, &out, aovs, &a.aov)?;
+        write_png(&mut outs, png, &image_of(&out))?;
+        if !aov_outputs.is_empty() {
+            let aovs = out.aovs.as_ref().context("internal error: the renderer returned no AOVs")?;
+            write_aovs(&mut outs, &aov_outputs, &out, aovs)?;
         }
+        outs.commit()?;
         eprintln!("wrote {} ({w}x{h}, {} of {} pixels covered)", a.output.display(), out.covered, w * h);
+        for (name, _) in &aov_outputs {
+            eprintln!("wrote {}", aov_path(&a.output, name).display());
+        }
         return Ok(());
     }
     let mut panels = Vec::new();
@@ -122,7 +149,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     let columns = if panels.len() <= 3 { panels.len() } else { panels.len().div_ceil(2) };
     let sheet = compose::sheet(&panels, columns, 4);
-    write_png(&a.output, &sheet)?;
+    write_png(&mut outs, png, &sheet)?;
+    outs.commit()?;
     eprintln!("wrote {} ({} panels)", a.output.display(), panels.len());
     Ok(())
 }
@@ -191,8 +219,8 @@ fn image_of(out: &RenderOutput) -> Image {
     Image { width: out.width, height: out.height, pixels: out.to_srgb8() }
 }
 
-fn write_png(path: &Path, img: &Image) -> Result<()> {
-    pomkit_io::write_image(path, img.width, img.height, PixelLayout::Rgb8, Pixels::U8(img.pixels.as_flattened()))?;
+fn write_png(outs: &mut Outputs, id: OutputId, img: &Image) -> Result<()> {
+    outs.write_image(id, img.width, img.height, PixelLayout::Rgb8, Pixels::U8(img.pixels.as_flattened()))?;
     Ok(())
 }
 
@@ -202,22 +230,27 @@ fn aov_path(png: &Path, name: &str) -> PathBuf {
     png.with_file_name(format!("{stem}.{name}.exr"))
 }
 
-fn write_aovs(png: &Path, out: &RenderOutput, aovs: &pomkit_cpu::Aovs, names: &[String]) -> Result<()> {
+/// Stages each AOV in its output (committed with the PNG).
+fn write_aovs(
+    outs: &mut Outputs,
+    names: &[(String, OutputId)],
+    out: &RenderOutput,
+    aovs: &pomkit_cpu::Aovs,
+) -> Result<()> {
     let (w, h) = (out.width, out.height);
-    for name in names {
-        let path = aov_path(png, name);
+    for (name, id) in names {
+        let id = *id;
         match name.as_str() {
             "uv" => {
                 let rgb: Vec<f32> = aovs.uv.iter().flat_map(|uv| [uv.x, uv.y, 0.0]).collect();
-                pomkit_io::write_image(&path, w, h, PixelLayout::RgbF32, Pixels::F32(&rgb))?;
+                outs.write_image(id, w, h, PixelLayout::RgbF32, Pixels::F32(&rgb))?;
             }
-            "depth" => pomkit_io::write_image(&path, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.depth))?,
-            "shadow" => pomkit_io::write_image(&path, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.shadow))?,
-            "fetches" => pomkit_io::write_image(&path, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.fetches))?,
-            "lod" => pomkit_io::write_image(&path, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.lod))?,
+            "depth" => outs.write_image(id, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.depth))?,
+            "shadow" => outs.write_image(id, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.shadow))?,
+            "fetches" => outs.write_image(id, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.fetches))?,
+            "lod" => outs.write_image(id, w, h, PixelLayout::GrayF32, Pixels::F32(&aovs.lod))?,
             _ => unreachable!("checked against AOVS"),
         }
-        eprintln!("wrote {}", path.display());
     }
     Ok(())
 }

@@ -21,8 +21,11 @@ use crate::heightfield::{EdgeMode, HeightField};
 /// Why a bake could not run.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum BakeError {
-    /// The scale is NaN or infinite.
-    #[error("scale is {0}: it must be a finite number (texel widths spanned by the full height range)")]
+    /// The scale is NaN, infinite, or larger in magnitude than [`MAX_SCALE`].
+    #[error(
+        "scale is {0}: it must be a finite number from -{MAX_SCALE:e} to {MAX_SCALE:e} (texel widths spanned by \
+         the full height range; 0 gives flat normals, a negative scale inverts the relief)"
+    )]
     BadScale(f32),
     /// The height field is smaller than 2 texels on a side, so no slope can be measured.
     #[error("height map is {width}x{height}: at least 2x2 texels are needed to measure slopes")]
@@ -42,6 +45,16 @@ pub enum BakeError {
     },
 }
 
+/// The largest magnitude of [`NormalBakeOptions::scale`].
+///
+/// A slope filter gives at most 0.5 depth units per texel along each axis (a full-range step
+/// between two neighbours), so the scaled slopes `g` reach `0.5 s` and the normalization
+/// computes `g.x^2 + g.y^2 + 1 <= s^2 / 2 + 1` in f32. That overflows to infinity (and every
+/// normal to zero) beyond `s = sqrt(2 f32::MAX) ~ 2.6e19`; 1e18 keeps a factor of 25 in
+/// reserve. Above a few thousand texel widths every slope of an 8- or 16-bit map already gives a
+/// practically horizontal normal, so the bound costs nothing.
+pub const MAX_SCALE: f32 = 1.0e18;
+
 /// How slopes are measured from the height field.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum NormalFilter {
@@ -58,7 +71,8 @@ pub enum NormalFilter {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NormalBakeOptions {
     /// Lengyel's `s`: the full height range spans this many texel widths. Default 8. Larger
-    /// values give steeper normals; 0 gives a flat map; negative values invert the relief.
+    /// values give steeper normals; 0 gives a flat map (every normal +Z); negative values invert
+    /// the relief (the map reads as a depth map). Its magnitude is at most [`MAX_SCALE`].
     pub scale: f32,
     /// Slope filter. Default [`NormalFilter::Central`].
     pub filter: NormalFilter,
@@ -78,10 +92,10 @@ impl NormalBakeOptions {
     /// Checks the options against a field.
     ///
     /// # Errors
-    /// [`BakeError::BadScale`] for a non-finite scale, [`BakeError::TooSmall`] for a field
-    /// narrower or shorter than 2 texels.
+    /// [`BakeError::BadScale`] for a non-finite scale or one beyond [`MAX_SCALE`] in magnitude,
+    /// [`BakeError::TooSmall`] for a field narrower or shorter than 2 texels.
     pub fn validate(&self, field: &HeightField) -> Result<(), BakeError> {
-        if !self.scale.is_finite() {
+        if !(self.scale.is_finite() && self.scale.abs() <= MAX_SCALE) {
             return Err(BakeError::BadScale(self.scale));
         }
         if field.width() < 2 || field.height() < 2 {
@@ -526,6 +540,40 @@ mod tests {
                     .collect();
                 assert_eq!(fast, slow, "{filter:?} {edges:?}");
             }
+        }
+    }
+
+    #[test]
+    fn scales_up_to_the_limit_give_unit_normals_and_larger_ones_are_refused() {
+        // Full-range steps between neighbours along x and y: the steepest slopes any filter sees.
+        let f = HeightField::from_height_fn(6, 6, |x, y| if (x / 2 + y / 2) % 2 == 0 { 1.0 } else { 0.0 });
+        for filter in [NormalFilter::Central, NormalFilter::Sobel] {
+            for scale in [MAX_SCALE, -MAX_SCALE, 1.0e12] {
+                let opts = NormalBakeOptions { scale, filter, edges: EdgeMode::Clamp, y_down: false };
+                let ns = bake_normals(&f, &opts).unwrap();
+                for n in &ns {
+                    assert!(n.is_finite() && (n.length() - 1.0).abs() < 1e-5, "{filter:?} {scale}: {n}");
+                }
+                let mut rgb = vec![[0u8; 3]; 36];
+                bake_normals_rgb8(&f, &opts, &mut rgb, &|_| {}).unwrap();
+                // A steep texel's normal is horizontal, never the zero vector (code 128, 128, 128).
+                assert!(rgb.iter().all(|c| *c != [128, 128, 128]), "{filter:?} {scale}: {rgb:?}");
+            }
+            for scale in [1.0e25, -1.0e25, MAX_SCALE * 1.01] {
+                let opts = NormalBakeOptions { scale, filter, ..Default::default() };
+                assert_eq!(bake_normals(&f, &opts), Err(BakeError::BadScale(scale)));
+                assert!(BakeError::BadScale(scale).to_string().contains("1e18"));
+            }
+        }
+        // 0 is flat; a negative scale mirrors the slopes (the relief read as depth).
+        let bump =
+            HeightField::from_height_fn(8, 8, |x, y| ((x as f32 - 3.5).powi(2) + (y as f32 - 3.5).powi(2)) / 25.0);
+        let flat = bake_normals(&bump, &NormalBakeOptions { scale: 0.0, ..Default::default() }).unwrap();
+        assert!(flat.iter().all(|n| *n == Vec3::Z));
+        let up = bake_normals(&bump, &NormalBakeOptions { scale: 4.0, ..Default::default() }).unwrap();
+        let down = bake_normals(&bump, &NormalBakeOptions { scale: -4.0, ..Default::default() }).unwrap();
+        for (a, b) in up.iter().zip(&down) {
+            assert!((*a - Vec3::new(-b.x, -b.y, b.z)).length() < 1e-6, "{a} vs {b}");
         }
     }
 

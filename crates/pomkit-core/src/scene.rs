@@ -231,6 +231,167 @@ impl Camera {
     }
 }
 
+/// The narrowest vertical field of view, in degrees, that a renderer draws.
+///
+/// A vertex is placed in view space with f32's relative precision (about 6e-8 of its distance
+/// from the eye); at 1e-3 degrees the whole view spans only about 2.9e5 such steps, so the
+/// rounding already moves vertices by a few pixels in a large frame. Narrower views (1e-30
+/// once covered no pixel at all) are refused.
+pub const MIN_FOV_DEG: f32 = 1.0e-3;
+
+/// The widest vertical field of view, in degrees. Closer to 180 the f32 tangent of the half
+/// angle loses its sign and the picture collapses to a point.
+pub const MAX_FOV_DEG: f32 = 179.0;
+
+/// The largest magnitude of any world-space coordinate (the camera's eye and target, every
+/// vertex of every object after its transform), so that the view and projection transforms
+/// (which multiply coordinates by up to `1 / tan(MIN_FOV_DEG / 2)`, about 1.1e5, and square
+/// distances) stay far from f32's overflow at 3.4e38.
+pub const MAX_COORDINATE: f32 = 1.0e18;
+
+/// How far from the eye, in multiples of the camera's near distance, a triangle crossing the
+/// near plane may reach: 2^20.
+///
+/// Clipping computes where an edge crosses the near plane from its endpoints' f32 clip
+/// coordinates, which carry rounding of about 6e-8 of their distance from the eye; beyond
+/// 2^20 near distances that rounding exceeds 1/16 of the near distance itself, and the clipped
+/// vertex lands visibly wrong or behind the eye (a plane of size 1e15 in front of the default
+/// camera drew no pixel). Triangles entirely beyond the near plane are not limited by this.
+pub const NEAR_RANGE: f32 = 1_048_576.0;
+
+/// Why a scene cannot be drawn in f32 (see [`Camera::check`] and [`Scene::check_drawable`]).
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum DrawableError {
+    /// A camera parameter is out of range; `field` is its scene-file key.
+    #[error("camera: {field}: {message}")]
+    Camera {
+        /// `eye`, `target`, `up`, `fov`, `near` or `far`.
+        field: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// An object's geometry lies where f32 cannot draw it.
+    #[error("object \"{object}\": {message}")]
+    Object {
+        /// The object's name.
+        object: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// A number for a message: plain when ordinary, in scientific notation when huge or tiny (f32's
+/// `Display` writes 1e30 with 31 digits).
+#[must_use]
+pub fn short_number(v: f32) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-4..1e6).contains(&v.abs()) { format!("{v:e}") } else { format!("{v}") }
+}
+
+/// A vector for a message, its components as [`short_number`].
+fn short_vec(v: Vec3) -> String {
+    format!("[{}, {}, {}]", short_number(v.x), short_number(v.y), short_number(v.z))
+}
+
+impl Camera {
+    /// Checks that the camera can be drawn with in f32: finite eye, target and up, eye and
+    /// target with coordinates at most [`MAX_COORDINATE`] in magnitude and apart, fov from
+    /// [`MIN_FOV_DEG`] to [`MAX_FOV_DEG`], `0 < near < far`, both finite.
+    ///
+    /// # Errors
+    /// The first [`DrawableError::Camera`] found, naming the scene-file key.
+    pub fn check(&self) -> Result<(), DrawableError> {
+        let bad = |field: &'static str, message: String| Err(DrawableError::Camera { field, message });
+        for (field, v) in [("eye", self.eye), ("target", self.target)] {
+            if !(v.is_finite() && v.abs().max_element() <= MAX_COORDINATE) {
+                return bad(
+                    field,
+                    format!(
+                        "{field} is {}: every component must be finite and at most {MAX_COORDINATE:e} in magnitude",
+                        short_vec(v)
+                    ),
+                );
+            }
+        }
+        let view = self.target - self.eye;
+        if view.length_squared() <= f32::MIN_POSITIVE {
+            return bad("target", format!("target {} equals eye: the camera looks nowhere", self.target));
+        }
+        // An up vector parallel to the view is not refused here: `view` then picks another
+        // (scene files refuse it, where it is a typo).
+        if !self.up.is_finite() {
+            return bad("up", format!("up is {}: every component must be finite", self.up));
+        }
+        if !(self.fov_y_deg.is_finite() && (MIN_FOV_DEG..=MAX_FOV_DEG).contains(&self.fov_y_deg)) {
+            return bad(
+                "fov",
+                format!(
+                    "fov is {}: it must be from {MIN_FOV_DEG:e} to {MAX_FOV_DEG} degrees (narrower views cannot place \
+                     vertices to within a pixel in f32)",
+                    short_number(self.fov_y_deg)
+                ),
+            );
+        }
+        if !(self.near.is_finite() && self.near > 0.0) {
+            return bad("near", format!("near is {}: it must be a finite number greater than 0", self.near));
+        }
+        if !(self.far.is_finite() && self.far > self.near) {
+            return bad("far", format!("far is {}: it must be finite and greater than near ({})", self.far, self.near));
+        }
+        Ok(())
+    }
+}
+
+impl Scene {
+    /// Checks that the camera and every object can be drawn in f32 ([`Camera::check`]; every
+    /// world-space vertex finite with coordinates at most [`MAX_COORDINATE`]; every triangle
+    /// that crosses the near plane within [`NEAR_RANGE`] near distances of the eye).
+    ///
+    /// # Errors
+    /// The first [`DrawableError`] found.
+    pub fn check_drawable(&self) -> Result<(), DrawableError> {
+        self.camera.check()?;
+        let view = self.camera.view();
+        let near = self.camera.near;
+        let reach = near * NEAR_RANGE;
+        for obj in &self.objects {
+            let bad = |message: String| Err(DrawableError::Object { object: obj.name.clone(), message });
+            if !obj.transform.is_finite() {
+                return bad("its transform is not finite".to_owned());
+            }
+            let mv = view * obj.transform;
+            let mut eye_space = Vec::with_capacity(obj.mesh.positions.len());
+            for &p in &obj.mesh.positions {
+                let w = obj.transform.transform_point3(p);
+                if !(w.is_finite() && w.abs().max_element() <= MAX_COORDINATE) {
+                    return bad(format!(
+                        "a vertex lies at {w}: size, scale and position must keep every coordinate finite and at \
+                         most {MAX_COORDINATE:e} in magnitude"
+                    ));
+                }
+                eye_space.push(mv.transform_point3(p));
+            }
+            for tri in obj.mesh.indices.chunks_exact(3) {
+                let v = [0, 1, 2].map(|k| eye_space.get(tri[k] as usize).copied().unwrap_or(Vec3::ZERO));
+                // View depth is -z; the triangle crosses the near plane when it has vertices on
+                // both sides.
+                let behind = v.iter().filter(|p| -p.z < near).count();
+                if behind == 0 || behind == 3 {
+                    continue;
+                }
+                let far = v.iter().map(|p| p.length()).fold(0.0f32, f32::max);
+                if far > reach {
+                    return bad(format!(
+                        "it crosses the camera's near plane and reaches {far:.3e} from the eye, more than \
+                         {NEAR_RANGE} (2^20) times near ({near}), where f32 clipping cannot place it: make the object \
+                         smaller (size, scale) or raise the camera's near"
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A light.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Light {
@@ -368,6 +529,49 @@ mod tests {
         let m = n.sample(Vec2::new(0.5, 0.5), EdgeMode::Clamp);
         assert!((m - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-6, "renormalized: {m}");
         assert_eq!(NormalMap::new(1, 1, vec![Vec3::ZERO]).unwrap().normals(), &[Vec3::Z]);
+    }
+
+    fn plane_scene(camera: Camera, size: f32) -> Scene {
+        let mesh = Arc::new(Mesh::plane(Vec2::splat(size), 1));
+        Scene {
+            camera,
+            lights: vec![],
+            materials: vec![Material::default()],
+            objects: vec![Object { name: "floor".into(), mesh, material: 0, transform: Mat4::IDENTITY }],
+            ambient: Vec3::ZERO,
+            background: Vec3::ZERO,
+        }
+    }
+
+    #[test]
+    fn what_f32_cannot_draw_is_refused_naming_the_key() {
+        let field = |r: Result<(), DrawableError>| match r {
+            Err(DrawableError::Camera { field, .. }) => field.to_owned(),
+            Err(DrawableError::Object { object, .. }) => format!("object {object}"),
+            Ok(()) => "ok".to_owned(),
+        };
+        let d = Camera::default();
+        assert_eq!(field(plane_scene(d, 2.0).check_drawable()), "ok");
+        for fov in [1e-30, 9e-4, 179.5, 180.0, f32::NAN] {
+            assert_eq!(field(Camera { fov_y_deg: fov, ..d }.check()), "fov", "{fov}");
+        }
+        assert_eq!(field(Camera { fov_y_deg: MIN_FOV_DEG, ..d }.check()), "ok");
+        // An eye at 1e30 is the eye's fault, not the up vector's.
+        assert_eq!(field(Camera { eye: Vec3::new(1e30, 2.0, 4.0), ..d }.check()), "eye");
+        assert_eq!(field(Camera { target: Vec3::splat(f32::INFINITY), ..d }.check()), "target");
+        // Crossing the near plane: 1e15 and 1e8 reach too far for near 0.05; 1e8 is fine with
+        // near 100.
+        assert_eq!(field(plane_scene(d, 1e15).check_drawable()), "object floor");
+        assert_eq!(field(plane_scene(d, 1e8).check_drawable()), "object floor");
+        let far_cam = Camera { eye: Vec3::new(0.0, 300.0, 600.0), near: 100.0, far: 1e9, ..d };
+        assert_eq!(field(plane_scene(far_cam, 1e8).check_drawable()), "ok");
+        // Wholly beyond the near plane (looking straight down), size is not limited by near.
+        let down = Camera { eye: Vec3::new(0.0, 10.0, 0.0), up: Vec3::Z, ..d };
+        assert_eq!(field(plane_scene(down, 1e12).check_drawable()), "ok");
+        // Beyond 1e18 (a plane of 1e15, the largest shape, scaled by 1e5).
+        let mut huge = plane_scene(down, 1e15);
+        huge.objects[0].transform = Mat4::from_scale(Vec3::splat(1e5));
+        assert_eq!(field(huge.check_drawable()), "object floor");
     }
 
     #[test]

@@ -48,7 +48,21 @@ pub struct ClipVertex {
     pub v: Varyings,
 }
 
+/// Subpixel precision of the fixed-point screen positions: 1/256 pixel, as GPUs snap.
+const SUBPIXEL: f64 = 256.0;
+
+/// Half-width of the guard band in NDC units (the visible screen is [-1, 1]): triangles reaching
+/// beyond it are clipped to it in clip space, so snapped screen positions stay below
+/// `(2^26 / 2 + 1) * 16384 ~ 2^39` pixels, whose products in the edge functions (about 2^96 in
+/// 1/256 pixel units) fit an `i128` exactly.
+const GUARD_NDC: f64 = 67_108_864.0;
+
 /// A triangle ready to rasterize: screen positions, 1/w, depth, and varyings divided by w.
+///
+/// Coverage is decided on the positions snapped to a 1/256-pixel grid, with exact integer edge
+/// functions and the top-left rule: two triangles sharing an edge evaluate it to exactly
+/// opposite values, so every pixel centre along it is covered by exactly one of them, however
+/// long or thin the triangles are (the rasterizer is watertight).
 #[derive(Clone, Debug)]
 pub struct ScreenTriangle {
     /// Screen positions (pixels, y down).
@@ -61,42 +75,92 @@ pub struct ScreenTriangle {
     pub v: [Varyings; 3],
     /// Object index, for the material and AOVs.
     pub object: u32,
-    /// Twice the signed screen area (positive after setup).
-    area2: f32,
+    /// Screen positions snapped to 1/256 pixel.
+    fixed: [[i64; 2]; 3],
+    /// Twice the signed area in squared 1/256 pixels (positive after setup).
+    area2: i128,
     /// Least depth of the three vertices, for front-to-back ordering.
     pub min_z: f32,
 }
 
 /// Clips a triangle against the near plane `z >= 0` (wgpu clip space) and against `w > 0`,
-/// returning 0 to 2 triangles (as a fan).
+/// and against a guard band far outside the screen (so that screen positions stay in the range
+/// the fixed-point rasterizer handles exactly), returning 0 or more triangles (as a fan).
+///
+/// The point where an edge crosses a plane is computed in f64 from the edge's endpoints taken
+/// in a fixed order, so the two triangles sharing an edge get bit-identical new vertices and
+/// no crack opens between them.
 pub fn clip_near(tri: [ClipVertex; 3]) -> Vec<[ClipVertex; 3]> {
-    let inside = |c: &ClipVertex| c.clip.z >= 0.0 && c.clip.w > 1e-6;
-    if tri.iter().all(inside) {
+    let near = |c: &ClipVertex| c.clip.z >= 0.0 && c.clip.w > 1e-6;
+    let guard = |c: &ClipVertex| {
+        let g = GUARD_NDC * f64::from(c.clip.w);
+        f64::from(c.clip.x).abs() <= g && f64::from(c.clip.y).abs() <= g
+    };
+    if tri.iter().all(|c| near(c) && guard(c)) {
         return vec![tri];
     }
-    if !tri.iter().any(inside) {
+    if !tri.iter().any(near) {
         return vec![];
     }
-    // Sutherland-Hodgman against z >= 0 (which implies w > 0 for a perspective projection).
-    let mut poly: Vec<ClipVertex> = Vec::with_capacity(4);
-    for i in 0..3 {
-        let (a, b) = (tri[i], tri[(i + 1) % 3]);
-        let (da, db) = (a.clip.z, b.clip.z);
-        if da >= 0.0 {
-            poly.push(a);
+    // Sutherland-Hodgman against z >= 0 (which implies w > 0 for a perspective projection),
+    // then against the four sides of the guard band.
+    type Plane = fn(Vec4) -> f64;
+    let planes: [(Plane, Option<usize>); 5] = [
+        (|c| f64::from(c.z), Some(2)),
+        (|c| GUARD_NDC * f64::from(c.w) - f64::from(c.x), None),
+        (|c| GUARD_NDC * f64::from(c.w) + f64::from(c.x), None),
+        (|c| GUARD_NDC * f64::from(c.w) - f64::from(c.y), None),
+        (|c| GUARD_NDC * f64::from(c.w) + f64::from(c.y), None),
+    ];
+    let mut poly: Vec<ClipVertex> = tri.to_vec();
+    for (dist, exact_zero) in planes {
+        if poly.iter().all(|c| dist(c.clip) >= 0.0) {
+            continue;
         }
-        if (da >= 0.0) != (db >= 0.0) {
-            let t = da / (da - db);
-            poly.push(ClipVertex { clip: a.clip.lerp(b.clip, t), v: Varyings::lerp2(&a.v, &b.v, t) });
+        let mut next = Vec::with_capacity(poly.len() + 1);
+        for i in 0..poly.len() {
+            let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+            let (da, db) = (dist(a.clip), dist(b.clip));
+            if da >= 0.0 {
+                next.push(a);
+            }
+            if (da >= 0.0) != (db >= 0.0) {
+                next.push(crossing(a, b, dist, exact_zero));
+            }
+        }
+        poly = next;
+        if poly.len() < 3 {
+            return vec![];
         }
     }
-    (1..poly.len().saturating_sub(1)).map(|k| [poly[0], poly[k], poly[k + 1]]).collect()
+    (1..poly.len() - 1).map(|k| [poly[0], poly[k], poly[k + 1]]).collect()
+}
+
+/// The point where edge `a`-`b` crosses the plane `dist = 0`, the same whichever way round the
+/// edge is given; `exact_zero` is the clip component the plane sets to 0 (the near plane's z).
+fn crossing(a: ClipVertex, b: ClipVertex, dist: fn(Vec4) -> f64, exact_zero: Option<usize>) -> ClipVertex {
+    let key = |c: &ClipVertex| c.clip.to_array().map(f32::to_bits);
+    let (p, q) = if key(&a) <= key(&b) { (a, b) } else { (b, a) };
+    let (dp, dq) = (dist(p.clip), dist(q.clip));
+    let t = dp / (dp - dq);
+    let lerp = |x: f32, y: f32| (f64::from(x) + (f64::from(y) - f64::from(x)) * t) as f32;
+    let mut clip = Vec4::new(
+        lerp(p.clip.x, q.clip.x),
+        lerp(p.clip.y, q.clip.y),
+        lerp(p.clip.z, q.clip.z),
+        lerp(p.clip.w, q.clip.w),
+    );
+    if let Some(k) = exact_zero {
+        clip[k] = 0.0;
+    }
+    ClipVertex { clip, v: Varyings::lerp2(&p.v, &q.v, t as f32) }
 }
 
 /// Projects a clipped triangle to the screen. Returns `None` for back faces (when `cull`),
-/// degenerate triangles, and non-finite input.
+/// degenerate triangles (zero area once snapped to 1/256 pixel), and non-finite input.
 pub fn setup(tri: &[ClipVertex; 3], width: u32, height: u32, object: u32, cull: bool) -> Option<ScreenTriangle> {
     let mut p = [Vec2::ZERO; 3];
+    let mut fixed = [[0i64; 2]; 3];
     let mut z = [0.0; 3];
     let mut inv_w = [0.0; 3];
     for k in 0..3 {
@@ -105,32 +169,51 @@ pub fn setup(tri: &[ClipVertex; 3], width: u32, height: u32, object: u32, cull: 
             return None;
         }
         let iw = 1.0 / c.w;
-        let ndc = Vec3::new(c.x * iw, c.y * iw, c.z * iw);
-        p[k] = Vec2::new((ndc.x * 0.5 + 0.5) * width as f32, (0.5 - ndc.y * 0.5) * height as f32);
-        z[k] = ndc.z;
+        // Screen positions in f64 from the f32 clip position, then snapped.
+        let w64 = f64::from(c.w);
+        let sx = (f64::from(c.x) / w64 * 0.5 + 0.5) * f64::from(width);
+        let sy = (0.5 - f64::from(c.y) / w64 * 0.5) * f64::from(height);
+        // Beyond the guard band (only by rounding after clipping) the snapped position would
+        // lose exactness: such a triangle cannot be drawn.
+        let limit = (GUARD_NDC * 0.5 + 1.0) * f64::from(width.max(height)) * 1.01;
+        if !(sx.abs() <= limit && sy.abs() <= limit) {
+            return None;
+        }
+        fixed[k] = [(sx * SUBPIXEL).round() as i64, (sy * SUBPIXEL).round() as i64];
+        p[k] = Vec2::new(sx as f32, sy as f32);
+        z[k] = c.z * iw;
         inv_w[k] = iw;
     }
     // Counter-clockwise in world is clockwise on a y-down screen: area < 0 is front-facing.
-    let area2 = (p[1] - p[0]).perp_dot(p[2] - p[0]);
-    if !area2.is_finite() || area2.abs() < 1e-12 {
+    let area2 = edge_function(fixed[0], fixed[1], fixed[2]);
+    if area2 == 0 {
         return None;
     }
-    let front = area2 < 0.0;
+    let front = area2 < 0;
     if cull && !front {
         return None;
     }
     let mut v = [tri[0].v, tri[1].v, tri[2].v];
     let mut area2 = area2;
-    if area2 < 0.0 {
+    if area2 < 0 {
         // Store with positive area: swap two vertices.
         p.swap(1, 2);
+        fixed.swap(1, 2);
         z.swap(1, 2);
         inv_w.swap(1, 2);
         v.swap(1, 2);
         area2 = -area2;
     }
     let min_z = z[0].min(z[1]).min(z[2]);
-    Some(ScreenTriangle { p, z, inv_w, v, object, area2, min_z })
+    Some(ScreenTriangle { p, z, inv_w, v, object, fixed, area2, min_z })
+}
+
+/// `(b - a) x (q - a)` on fixed-point positions, exactly.
+#[inline]
+fn edge_function(a: [i64; 2], b: [i64; 2], q: [i64; 2]) -> i128 {
+    let d = [i128::from(b[0]) - i128::from(a[0]), i128::from(b[1]) - i128::from(a[1])];
+    let r = [i128::from(q[0]) - i128::from(a[0]), i128::from(q[1]) - i128::from(a[1])];
+    d[0] * r[1] - d[1] * r[0]
 }
 
 /// What the rasterizer hands the shader for one pixel of a quad.
@@ -151,36 +234,34 @@ pub struct Fragment {
 }
 
 impl ScreenTriangle {
-    /// Edge functions at point `q`, normalized to barycentric weights (not perspective
-    /// corrected), and whether the point is covered under the top-left rule.
-    fn barycentric(&self, q: Vec2) -> (Vec3, bool) {
-        let e = |a: Vec2, b: Vec2| (b - a).perp_dot(q - a);
-        let w0 = e(self.p[1], self.p[2]);
-        let w1 = e(self.p[2], self.p[0]);
-        let w2 = e(self.p[0], self.p[1]);
-        let covered = self.edge_ok(w0, self.p[1], self.p[2])
-            && self.edge_ok(w1, self.p[2], self.p[0])
-            && self.edge_ok(w2, self.p[0], self.p[1]);
-        (Vec3::new(w0, w1, w2) / self.area2, covered)
+    /// Edge functions at the fixed-point screen point `q` (1/256 pixel units), normalized to
+    /// barycentric weights (not perspective corrected), and whether `q` is covered under the
+    /// top-left rule.
+    fn barycentric(&self, q: [i64; 2]) -> (Vec3, bool) {
+        let [a, b, c] = self.fixed;
+        let w0 = edge_function(b, c, q);
+        let w1 = edge_function(c, a, q);
+        let w2 = edge_function(a, b, q);
+        let covered = edge_ok(w0, b, c) && edge_ok(w1, c, a) && edge_ok(w2, a, b);
+        let area = self.area2 as f64;
+        let bary = Vec3::new((w0 as f64 / area) as f32, (w1 as f64 / area) as f32, (w2 as f64 / area) as f32);
+        (bary, covered)
     }
 
-    /// Top-left rule: a pixel exactly on an edge belongs to the triangle only for top or left
-    /// edges, so shared edges are drawn once.
-    fn edge_ok(&self, w: f32, a: Vec2, b: Vec2) -> bool {
-        if w > 0.0 {
-            return true;
-        }
-        if w < 0.0 {
-            return false;
-        }
-        let d = b - a;
-        // With positive area (counter-clockwise in y-down pixel space), top edges run toward
-        // -x horizontally and left edges run toward +y.
-        (d.y == 0.0 && d.x < 0.0) || d.y > 0.0
+    /// Perspective-correct varyings and depth at the centre of pixel `(x, y)`.
+    fn interpolate(&self, x: u32, y: u32) -> (Varyings, f32, bool) {
+        self.interpolate_fixed([i64::from(x) * 256 + 128, i64::from(y) * 256 + 128])
     }
 
-    /// Perspective-correct varyings and depth at pixel centre `q`.
-    fn interpolate(&self, q: Vec2) -> (Varyings, f32, bool) {
+    /// Perspective-correct varyings and depth at screen point `q` (pixels).
+    #[cfg(test)]
+    fn interpolate_at(&self, q: Vec2) -> (Varyings, f32, bool) {
+        let snap = |c: f32| (f64::from(c) * SUBPIXEL).round() as i64;
+        self.interpolate_fixed([snap(q.x), snap(q.y)])
+    }
+
+    /// Perspective-correct varyings and depth at fixed-point screen point `q`.
+    fn interpolate_fixed(&self, q: [i64; 2]) -> (Varyings, f32, bool) {
         let (b, covered) = self.barycentric(q);
         let z = b.x * self.z[0] + b.y * self.z[1] + b.z * self.z[2];
         let pw = Vec3::new(b.x * self.inv_w[0], b.y * self.inv_w[1], b.z * self.inv_w[2]);
@@ -192,12 +273,15 @@ impl ScreenTriangle {
     /// Pixel bounding box clamped to `[x0, x1) x [y0, y1)`, expanded to even coordinates so
     /// quads align.
     pub fn quad_bounds(&self, x0: u32, y0: u32, x1: u32, y1: u32) -> Option<(u32, u32, u32, u32)> {
-        let lo = self.p[0].min(self.p[1]).min(self.p[2]);
-        let hi = self.p[0].max(self.p[1]).max(self.p[2]);
-        let bx0 = (lo.x.floor().max(x0 as f32) as u32) & !1;
-        let by0 = (lo.y.floor().max(y0 as f32) as u32) & !1;
-        let bx1 = (hi.x.ceil().min(x1 as f32)).max(0.0) as u32;
-        let by1 = (hi.y.ceil().min(y1 as f32)).max(0.0) as u32;
+        let [a, b, c] = self.fixed;
+        // Pixels whose centres (i * 256 + 128) can lie within the snapped vertices' extent.
+        let lo = |k: usize| (a[k].min(b[k]).min(c[k]) - 128).div_euclid(256);
+        let hi = |k: usize| (a[k].max(b[k]).max(c[k]) - 128).div_euclid(256) + 1;
+        let clamp = |v: i64, l: u32, h: u32| v.clamp(i64::from(l), i64::from(h)) as u32;
+        let bx0 = clamp(lo(0), x0, x1) & !1;
+        let by0 = clamp(lo(1), y0, y1) & !1;
+        let bx1 = clamp(hi(0), x0, x1);
+        let by1 = clamp(hi(1), y0, y1);
         (bx0 < bx1 && by0 < by1).then_some((bx0.max(x0), by0.max(y0), bx1, by1))
     }
 
@@ -213,8 +297,7 @@ impl ScreenTriangle {
                 let mut any = false;
                 for (k, slot) in px.iter_mut().enumerate() {
                     let (dx, dy) = ((k & 1) as u32, (k >> 1) as u32);
-                    let q = Vec2::new((qx + dx) as f32 + 0.5, (qy + dy) as f32 + 0.5);
-                    *slot = self.interpolate(q);
+                    *slot = self.interpolate(qx + dx, qy + dy);
                     let inside = qx + dx >= x0 && qx + dx < x1 && qy + dy >= y0 && qy + dy < y1;
                     slot.2 &= inside;
                     any |= slot.2;
@@ -235,6 +318,19 @@ impl ScreenTriangle {
             qy += 2;
         }
     }
+}
+
+/// Top-left rule: a pixel centre exactly on an edge belongs to the triangle only for top or
+/// left edges, so shared edges are drawn once.
+#[inline]
+fn edge_ok(w: i128, a: [i64; 2], b: [i64; 2]) -> bool {
+    if w != 0 {
+        return w > 0;
+    }
+    let d = [b[0] - a[0], b[1] - a[1]];
+    // With positive area (counter-clockwise in y-down pixel space), top edges run toward -x
+    // horizontally and left edges run toward +y.
+    (d[1] == 0 && d[0] < 0) || d[1] > 0
 }
 
 #[cfg(test)]
@@ -262,6 +358,80 @@ mod tests {
         assert!(count.iter().all(|&n| n == 1), "{count:?}");
     }
 
+    /// Rasterizes every triangle (clipped, no culling) into a `w x h` count of fragments per pixel.
+    fn coverage(tris: &[[ClipVertex; 3]], w: u32, h: u32) -> Vec<u32> {
+        let mut count = vec![0u32; (w * h) as usize];
+        for &t in tris {
+            for c in clip_near(t) {
+                if let Some(st) = setup(&c, w, h, 0, false) {
+                    st.rasterize(0, 0, w, h, |f| count[(f.y * w + f.x) as usize] += 1);
+                }
+            }
+        }
+        count
+    }
+
+    #[test]
+    fn a_fan_of_triangles_sharing_edges_covers_each_pixel_exactly_once() {
+        let (w, h) = (64u32, 48u32);
+        // Centres: an arbitrary point, and a pixel centre (so that every edge of the fan passes
+        // exactly through pixel centres, where only the top-left rule decides).
+        let centres =
+            [Vec2::new(0.123_456, -0.056_789), Vec2::new((20.5 / 64.0) * 2.0 - 1.0, 1.0 - (30.5 / 48.0) * 2.0)];
+        // Rings just outside the screen, and far out (long thin triangles, whose edge functions
+        // f32 cannot evaluate near the screen).
+        for (centre, radius) in centres.into_iter().flat_map(|c| [(c, 3.0f32), (c, 1.0e6)]) {
+            for n in [3usize, 7, 37, 360] {
+                // A ring outside the screen, so the fan covers all of it; every triangle shares
+                // its two outer edges with its neighbours.
+                let ring: Vec<Vec2> = (0..n)
+                    .map(|i| {
+                        let a = i as f32 / n as f32 * std::f32::consts::TAU + 0.1;
+                        Vec2::new(a.cos(), a.sin()) * radius
+                    })
+                    .collect();
+                let tris: Vec<[ClipVertex; 3]> = (0..n)
+                    .map(|i| {
+                        let (p, q) = (ring[i], ring[(i + 1) % n]);
+                        [
+                            vert(centre.x, centre.y, 0.5, 1.0, 0.0),
+                            vert(p.x, p.y, 0.5, 1.0, 0.0),
+                            vert(q.x, q.y, 0.5, 1.0, 0.0),
+                        ]
+                    })
+                    .collect();
+                let count = coverage(&tris, w, h);
+                let bad: Vec<_> = count.iter().enumerate().filter(|(_, c)| **c != 1).take(8).collect();
+                assert!(
+                    bad.is_empty(),
+                    "centre {centre}, radius {radius}, {n} triangles: pixels (index, count) {bad:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn huge_and_long_thin_triangles_stay_watertight() {
+        let (w, h) = (40u32, 30u32);
+        let quad = |r: f32, tilt: f32| {
+            let (a, b, c, d) = (
+                vert(-r, -r + tilt, 0.5, 1.0, 0.0),
+                vert(r, -r, 0.5, 1.0, 1.0),
+                vert(r, r - tilt, 0.5, 1.0, 1.0),
+                vert(-r, r, 0.5, 1.0, 0.0),
+            );
+            [[a, b, c], [a, c, d]]
+        };
+        // Corners far beyond f32's pixel precision (the diagonal's edge function would round
+        // away in f32), beyond the guard band (1e8), and at 1e20 in NDC.
+        for r in [1.0e4, 3.0e6, 1.0e8, 1.0e20] {
+            for tilt in [0.0, 0.37 * r / 1.0e3] {
+                let count = coverage(&quad(r, tilt), w, h);
+                assert!(count.iter().all(|&c| c == 1), "r {r}, tilt {tilt}: {count:?}");
+            }
+        }
+    }
+
     #[test]
     fn interpolation_is_perspective_correct() {
         // An edge from w = 1 to w = 3: the screen midpoint is at u = 1/4 of the way, not 1/2.
@@ -269,7 +439,8 @@ mod tests {
         let b = vert(3.0, -3.0, 1.5, 3.0, 1.0); // same NDC x = 1, y = -1
         let c = vert(-1.0, 1.0, 0.5, 1.0, 0.0);
         let st = setup(&[a, b, c], 64, 64, 0, false).unwrap();
-        let (v, _, _) = st.interpolate(Vec2::new(32.0, 64.0));
+        // The centre of pixel (31.5, 63.5) is the screen point (32, 64).
+        let (v, _, _) = st.interpolate_at(Vec2::new(32.0, 64.0));
         // At the screen midpoint of the bottom edge, 1/w interpolates linearly: (1 + 1/3) / 2;
         // u/w: (0 + 1/3) / 2; u = (1/6) / (2/3) = 1/4.
         assert!((v.uv.x - 0.25).abs() < 1e-3, "{}", v.uv.x);

@@ -3,23 +3,53 @@
 //! - Height maps: 8- and 16-bit grey, RGB (luma), RGBA (any chosen channel, e.g. the alpha of a
 //!   combined normal + height map), float EXR; height (white = high, the default) or depth
 //!   (white = deep) convention; any size.
-//! - Outputs are written atomically: the image goes to a temporary file in the destination's
-//!   folder, which is renamed over the destination only once it is complete. A failed write
-//!   leaves no partial file (DESIGN section 6).
+//! - Outputs are checked up front and committed together ([`output::Outputs`]): each goes to a
+//!   temporary file in the destination's folder, renamed over the destination only once the
+//!   whole run has succeeded. A failed run leaves no new or changed file.
+//! - Rays files are read as a stream ([`rays::RayReader`]).
 
 use std::fmt;
-use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use image::{DynamicImage, ImageEncoder};
 use pomkit_core::{HeightField, HeightFieldError};
 
+#[doc(hidden)]
+pub mod fuzz_entry;
 pub mod mesh;
+pub mod output;
+pub mod rays;
+pub mod read;
 pub mod scene;
 
-pub use mesh::{MeshLoadError, load_mesh};
+pub use mesh::{MeshLoadError, decode_mesh, load_mesh};
 pub use scene::{SceneError, load_scene, parse_scene};
+
+/// A path for a message: as displayed, but with control characters (a NUL, a newline, an escape
+/// sequence) escaped as in Rust string literals (`\u{0}`, `\n`), so that a hostile file name
+/// cannot garble or hide the message. Ordinary paths print unchanged.
+#[must_use]
+pub fn shown(path: &Path) -> Shown<'_> {
+    Shown(path)
+}
+
+/// See [`shown`].
+#[derive(Clone, Copy, Debug)]
+pub struct Shown<'a>(&'a Path);
+
+impl fmt::Display for Shown<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for c in self.0.to_string_lossy().chars() {
+            if c.is_control() {
+                write!(f, "{}", c.escape_debug())?;
+            } else {
+                write!(f, "{c}")?;
+            }
+        }
+        Ok(())
+    }
+}
 
 /// Which channel of an image holds the height.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -87,7 +117,7 @@ pub struct HeightLoadOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
     /// The file could not be opened or read.
-    #[error("cannot read {path}: {reason}")]
+    #[error("cannot read {}: {reason}", crate::shown(path))]
     Read {
         /// The file.
         path: PathBuf,
@@ -95,7 +125,7 @@ pub enum IoError {
         reason: std::io::Error,
     },
     /// The file is not an image pomkit can decode, or it is truncated or corrupt.
-    #[error("cannot decode {path} as an image: {reason}")]
+    #[error("cannot decode {} as an image: {reason}", crate::shown(path))]
     Decode {
         /// The file.
         path: PathBuf,
@@ -103,7 +133,7 @@ pub enum IoError {
         reason: image::ImageError,
     },
     /// The image has no pixels.
-    #[error("{path} is {width}x{height}: an image needs at least one pixel")]
+    #[error("{} is {width}x{height}: an image needs at least one pixel", crate::shown(path))]
     Empty {
         /// The file.
         path: PathBuf,
@@ -113,7 +143,10 @@ pub enum IoError {
         height: u32,
     },
     /// `--channel a` on an image without alpha.
-    #[error("{path} has no alpha channel, so --channel a cannot read a height from it (try luma, r, g or b)")]
+    #[error(
+        "{} has no alpha channel, so --channel a cannot read a height from it (try luma, r, g or b)",
+        crate::shown(path)
+    )]
     NoAlpha {
         /// The file.
         path: PathBuf,
@@ -122,7 +155,7 @@ pub enum IoError {
     #[error("unknown channel '{0}': expected one of r, g, b, a, luma")]
     UnknownChannel(String),
     /// A float image holds NaN or infinity.
-    #[error("{path}: pixel ({x}, {y}) is {value}; heights must be finite")]
+    #[error("{}: pixel ({x}, {y}) is {value}; heights must be finite", crate::shown(path))]
     NotFinite {
         /// The file.
         path: PathBuf,
@@ -134,7 +167,10 @@ pub enum IoError {
         value: f32,
     },
     /// A float image's values leave `[0, 1]` and normalisation was not asked for.
-    #[error("{path}: heights span [{min}, {max}] but must lie in [0, 1]; pass --normalize to rescale them")]
+    #[error(
+        "{}: heights span [{min}, {max}] but must lie in [0, 1]; pass --normalize to rescale them",
+        crate::shown(path)
+    )]
     OutOfRange {
         /// The file.
         path: PathBuf,
@@ -144,7 +180,7 @@ pub enum IoError {
         max: f32,
     },
     /// The pixel layout is not one pomkit reads.
-    #[error("{path}: unsupported pixel format {format}")]
+    #[error("{}: unsupported pixel format {format}", crate::shown(path))]
     UnsupportedPixels {
         /// The file.
         path: PathBuf,
@@ -152,7 +188,7 @@ pub enum IoError {
         format: String,
     },
     /// The output's extension does not fit what is written.
-    #[error("{path}: cannot write {what} to this file type; use {expected}")]
+    #[error("{}: cannot write {what} to this file type; use {expected}", crate::shown(path))]
     UnsupportedOutput {
         /// The file.
         path: PathBuf,
@@ -163,7 +199,7 @@ pub enum IoError {
     },
     /// The output could not be written (missing folder, no permission, disk full...). Nothing
     /// was left at the destination.
-    #[error("cannot write {path}: {reason}")]
+    #[error("cannot write {}: {reason}", crate::shown(path))]
     Write {
         /// The file.
         path: PathBuf,
@@ -171,7 +207,7 @@ pub enum IoError {
         reason: std::io::Error,
     },
     /// The encoder failed. Nothing was left at the destination.
-    #[error("cannot encode {path}: {reason}")]
+    #[error("cannot encode {}: {reason}", crate::shown(path))]
     Encode {
         /// The file.
         path: PathBuf,
@@ -179,12 +215,58 @@ pub enum IoError {
         reason: image::ImageError,
     },
     /// The pixels do not form a valid height field.
-    #[error("{path}: {reason}")]
+    #[error("{}: {reason}", crate::shown(path))]
     Field {
         /// The file.
         path: PathBuf,
         /// What is wrong.
         reason: HeightFieldError,
+    },
+    /// An output was refused before any work: it is an input, another output, read-only...
+    #[error(transparent)]
+    Output(#[from] output::OutputError),
+    /// The file does not start with the signature of an image format (checked on its first
+    /// bytes, before reading more).
+    #[error("cannot decode {} as an image: it is not a PNG, JPEG, TIFF or OpenEXR file ({start})", crate::shown(path))]
+    NotAnImage {
+        /// The file.
+        path: PathBuf,
+        /// What its first bytes are.
+        start: String,
+    },
+    /// The image is larger than pomkit reads, or than the memory there is (docs/LIMITS.md).
+    #[error("{} is {width}x{height} pixels: {reason}", crate::shown(path))]
+    ImageTooLarge {
+        /// The file.
+        path: PathBuf,
+        /// Width in pixels, from the header.
+        width: u32,
+        /// Height in pixels, from the header.
+        height: u32,
+        /// The limit, and the figures.
+        reason: String,
+    },
+    /// A normal map's texel is not a usable tangent-space normal.
+    #[error("{}: texel ({x}, {y}) is ({}, {}, {}): {reason}", crate::shown(path), value[0], value[1], value[2])]
+    BadNormal {
+        /// The file.
+        path: PathBuf,
+        /// Column.
+        x: u32,
+        /// Row.
+        y: u32,
+        /// The stored vector, as decoded (`c * 2 - 1` for integer images).
+        value: [f32; 3],
+        /// What is wrong.
+        reason: &'static str,
+    },
+    /// The memory budget could not be read (a malformed `POMKIT_MEMORY_LIMIT`).
+    #[error("cannot read {}: {reason}", crate::shown(path))]
+    Memory {
+        /// The file.
+        path: PathBuf,
+        /// The reason.
+        reason: pomkit_core::memory::MemoryError,
     },
 }
 
@@ -192,8 +274,13 @@ pub enum IoError {
 ///
 /// # Errors
 /// Any [`IoError`] reading or decoding the file, or converting its pixels.
+///
+/// The file must start with an image format's signature (so `/dev/zero` is refused at once), it
+/// is read up to [`read::MAX_IMAGE_BYTES`], and the image may have at most
+/// [`pomkit_core::MAX_SIZE`] pixels a side and must fit in the memory budget
+/// ([`read::decode_image_limited`]).
 pub fn load_height_field(path: &Path, opts: &HeightLoadOptions) -> Result<HeightField, IoError> {
-    let bytes = std::fs::read(path).map_err(|reason| IoError::Read { path: path.to_owned(), reason })?;
+    let bytes = read::read_image_file(path)?;
     decode_height_field(&bytes, path, opts)
 }
 
@@ -203,12 +290,165 @@ pub fn load_height_field(path: &Path, opts: &HeightLoadOptions) -> Result<Height
 /// # Errors
 /// As [`load_height_field`].
 pub fn decode_height_field(bytes: &[u8], path: &Path, opts: &HeightLoadOptions) -> Result<HeightField, IoError> {
-    let decode_err = |reason| IoError::Decode { path: path.to_owned(), reason };
-    let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|e| IoError::Read { path: path.to_owned(), reason: e })?;
-    let img = reader.decode().map_err(decode_err)?;
-    image_to_height_field(&img, path, opts)
+    // After decoding, the heights as floats and the height field: 8 bytes per pixel.
+    match read::decode_image_limited(bytes, path, 8) {
+        Ok(img) => image_to_height_field(&img, path, opts),
+        // What the image crate cannot read, but a height map may well be: a single-channel
+        // OpenEXR (a depth or height render) and a float TIFF, read with the decoders image
+        // itself uses.
+        Err(err) => match float_samples(bytes, path)? {
+            Some(raw) => raw.into_height_field(path, opts),
+            None => Err(err),
+        },
+    }
+}
+
+/// Float samples decoded directly: `channels` per pixel (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA),
+/// row-major.
+struct FloatSamples {
+    width: u32,
+    height: u32,
+    channels: usize,
+    samples: Vec<f32>,
+}
+
+impl FloatSamples {
+    fn into_height_field(self, path: &Path, opts: &HeightLoadOptions) -> Result<HeightField, IoError> {
+        let has_alpha = self.channels == 2 || self.channels == 4;
+        if opts.channel == Channel::A && !has_alpha {
+            return Err(IoError::NoAlpha { path: path.to_owned() });
+        }
+        let pick = |p: &[f32]| -> f32 {
+            let rgba = match *p {
+                [g] => [g, g, g, 1.0],
+                [g, a] => [g, g, g, a],
+                [r, g, b] => [r, g, b, 1.0],
+                [r, g, b, a] => [r, g, b, a],
+                _ => [f32::NAN; 4],
+            };
+            match opts.channel {
+                Channel::R => rgba[0],
+                Channel::G => rgba[1],
+                Channel::B => rgba[2],
+                Channel::A => rgba[3],
+                Channel::Luma if self.channels <= 2 => rgba[0],
+                Channel::Luma => 0.2126 * rgba[0] + 0.7152 * rgba[1] + 0.0722 * rgba[2],
+            }
+        };
+        let values: Vec<f32> = self.samples.chunks_exact(self.channels).map(pick).collect();
+        heights_from_values(values, self.width, self.height, path, opts)
+    }
+}
+
+/// The size limit of [`read::decode_image_limited`], for the direct decoders: at most
+/// [`pomkit_core::MAX_SIZE`] a side, and the decoded floats (plus the height field's 8 bytes
+/// per pixel) within the memory budget.
+fn check_float_size(path: &Path, width: u32, height: u32, channels: usize) -> Result<(), IoError> {
+    let too_large = |reason: String| Err(IoError::ImageTooLarge { path: path.to_owned(), width, height, reason });
+    if width == 0 || height == 0 {
+        return Err(IoError::Empty { path: path.to_owned(), width, height });
+    }
+    if width > pomkit_core::MAX_SIZE || height > pomkit_core::MAX_SIZE {
+        return too_large(format!("pomkit reads images of at most {} pixels a side", pomkit_core::MAX_SIZE));
+    }
+    let needed = u64::from(width) * u64::from(height) * (4 * channels as u64 + 8);
+    let budget =
+        pomkit_core::memory::available_bytes().map_err(|e| IoError::Memory { path: path.to_owned(), reason: e })?;
+    if let Some(b) = budget.filter(|b| needed > b.bytes) {
+        return too_large(format!(
+            "reading it needs about {}, but only {} is available",
+            pomkit_core::memory::format_bytes(needed),
+            pomkit_core::memory::format_bytes(b.bytes)
+        ));
+    }
+    Ok(())
+}
+
+/// A decoder's error as [`IoError::Decode`].
+fn direct_decode_error(path: &Path, format: image::ImageFormat, err: impl std::fmt::Display) -> IoError {
+    let hint = image::error::ImageFormatHint::Exact(format);
+    IoError::Decode {
+        path: path.to_owned(),
+        reason: image::ImageError::Decoding(image::error::DecodingError::new(hint, err.to_string())),
+    }
+}
+
+/// Float samples of an OpenEXR file with one channel (any name: Y, Z, R...), or of a TIFF
+/// whose samples are floats; `None` for any other file (which the image crate's error then
+/// describes).
+fn float_samples(bytes: &[u8], path: &Path) -> Result<Option<FloatSamples>, IoError> {
+    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        return exr_single_channel(bytes, path);
+    }
+    if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
+        return tiff_float(bytes, path);
+    }
+    Ok(None)
+}
+
+/// The one channel of a single-channel OpenEXR file's first layer.
+fn exr_single_channel(bytes: &[u8], path: &Path) -> Result<Option<FloatSamples>, IoError> {
+    use exr::prelude::ReadChannels as _;
+    use exr::prelude::ReadLayers as _;
+    let err = |e: exr::error::Error| direct_decode_error(path, image::ImageFormat::OpenExr, e);
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false).map_err(err)?;
+    let Some(header) = meta.headers.first() else { return Ok(None) };
+    if header.channels.list.len() != 1 || header.deep {
+        return Ok(None);
+    }
+    let size = header.layer_size;
+    let (width, height) = (u32::try_from(size.0).unwrap_or(u32::MAX), u32::try_from(size.1).unwrap_or(u32::MAX));
+    check_float_size(path, width, height, 1)?;
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(std::io::Cursor::new(bytes))
+        .map_err(err)?;
+    let Some(channel) = image.layer_data.channel_data.list.first() else { return Ok(None) };
+    let samples: Vec<f32> = channel.sample_data.values_as_f32().collect();
+    if samples.len() != width as usize * height as usize {
+        return Err(direct_decode_error(
+            path,
+            image::ImageFormat::OpenExr,
+            "the channel's sample count does not match the image size",
+        ));
+    }
+    Ok(Some(FloatSamples { width, height, channels: 1, samples }))
+}
+
+/// The samples of a TIFF whose samples are 32- or 64-bit floats (grey, grey + alpha, RGB,
+/// RGBA); `None` for integer TIFFs (which the image crate reads).
+fn tiff_float(bytes: &[u8], path: &Path) -> Result<Option<FloatSamples>, IoError> {
+    use tiff::ColorType;
+    use tiff::decoder::{Decoder, DecodingResult, Limits};
+    let err = |e: tiff::TiffError| direct_decode_error(path, image::ImageFormat::Tiff, e);
+    let mut decoder = Decoder::new(std::io::Cursor::new(bytes)).map_err(err)?;
+    let (width, height) = decoder.dimensions().map_err(err)?;
+    let channels = match decoder.colortype().map_err(err)? {
+        ColorType::Gray(32 | 64) => 1,
+        ColorType::GrayA(32 | 64) => 2,
+        ColorType::RGB(32 | 64) => 3,
+        ColorType::RGBA(32 | 64) => 4,
+        _ => return Ok(None),
+    };
+    check_float_size(path, width, height, channels)?;
+    let mut decoder = decoder.with_limits(Limits::unlimited());
+    let samples: Vec<f32> = match decoder.read_image().map_err(err)? {
+        DecodingResult::F32(v) => v,
+        DecodingResult::F64(v) => v.into_iter().map(|x| x as f32).collect(),
+        _ => return Ok(None),
+    };
+    if samples.len() != width as usize * height as usize * channels {
+        return Err(direct_decode_error(
+            path,
+            image::ImageFormat::Tiff,
+            "the sample count does not match the image size",
+        ));
+    }
+    Ok(Some(FloatSamples { width, height, channels, samples }))
 }
 
 /// Converts a decoded image to a height field (see [`load_height_field`]).
@@ -289,10 +529,11 @@ fn heights_from_values(
         max = max.max(value);
     }
     if opts.normalize {
-        let span = max - min;
+        // In f64: the span of finite f32 values (up to 2 * 3.4e38) overflows f32.
+        let (lo, span) = (f64::from(min), f64::from(max) - f64::from(min));
         for v in &mut values {
             // A constant image normalizes to the surface (height 1).
-            *v = if span > 0.0 { (*v - min) / span } else { 1.0 };
+            *v = if span > 0.0 { ((f64::from(*v) - lo) / span) as f32 } else { 1.0 };
         }
     } else if min < 0.0 || max > 1.0 {
         return Err(IoError::OutOfRange { path: path.to_owned(), min, max });
@@ -377,11 +618,14 @@ pub enum Pixels<'a> {
 
 /// Writes an image atomically: PNG for 8- and 16-bit layouts, OpenEXR (`.exr`) for float ones.
 ///
-/// The image is encoded into a temporary file beside `path`, flushed, then renamed over `path`.
+/// A one-output [`output::Outputs`]: the image is encoded into a temporary file beside `path`,
+/// flushed, then renamed over `path` (see the [`output`] module for read-only files, links
+/// and devices). To write several files of one run all or nothing, use [`output::Outputs`].
 ///
 /// # Errors
 /// [`IoError::UnsupportedOutput`] when the extension does not fit the layout,
-/// [`IoError::Write`] or [`IoError::Encode`] when writing fails (no file is left behind).
+/// [`IoError::Output`] when the output is refused, [`IoError::Write`] or [`IoError::Encode`]
+/// when writing fails (no file is left behind).
 ///
 /// # Panics
 /// If the sample count does not equal `width * height * channels`, or the sample type does
@@ -394,9 +638,17 @@ pub fn write_image(
     pixels: Pixels<'_>,
 ) -> Result<(), IoError> {
     check_output(path, layout)?;
-    let want_exr = layout.is_float();
+    let mut outs = output::Outputs::new();
+    let id = outs.output(path);
+    outs.check()?;
+    outs.write_image(id, width, height, layout, pixels)?;
+    outs.commit()
+}
+
+/// The samples as an image of the layout's type.
+fn to_image(width: u32, height: u32, layout: PixelLayout, pixels: Pixels<'_>) -> DynamicImage {
     let n = width as usize * height as usize * layout.channels();
-    let img: DynamicImage = match (layout, pixels) {
+    match (layout, pixels) {
         (PixelLayout::Gray8, Pixels::U8(p)) => {
             assert_eq!(p.len(), n, "sample count");
             image::GrayImage::from_raw(width, height, p.to_vec()).expect("size checked").into()
@@ -427,25 +679,66 @@ pub fn write_image(
             image::Rgba32FImage::from_raw(width, height, p.to_vec()).expect("size checked").into()
         }
         (layout, _) => panic!("pixel samples do not match layout {layout:?}"),
-    };
-    let format = if want_exr { image::ImageFormat::OpenExr } else { image::ImageFormat::Png };
-    write_atomically(path, |file| {
-        let mut w = BufWriter::new(file);
-        if format == image::ImageFormat::Png {
-            // Fast compression: baked maps are large and PNG's best setting is several times
-            // slower for a few percent.
-            let enc = image::codecs::png::PngEncoder::new_with_quality(
-                &mut w,
-                image::codecs::png::CompressionType::Fast,
-                image::codecs::png::FilterType::Adaptive,
-            );
-            enc.write_image(img.as_bytes(), width, height, img.color().into()).map_err(WriteFail::Encode)?;
-        } else {
-            img.write_to(&mut w, format).map_err(WriteFail::Encode)?;
+    }
+}
+
+/// Encodes `img` as PNG (8/16-bit layouts) or OpenEXR (float layouts) into `w`.
+fn encode_image(w: &mut dyn output::WriteSeek, img: &DynamicImage, layout: PixelLayout) -> Result<(), WriteFail> {
+    if layout.is_float() {
+        // image's OpenEXR encoder reports the writer's I/O errors (a full disk) as "decoding"
+        // errors carrying only text: keep the writer's own error and report that instead.
+        let mut rec = RecordingWriter { inner: w, error: None };
+        let result = img.write_to(&mut rec, image::ImageFormat::OpenExr);
+        match (result, rec.error) {
+            (Ok(()), _) => Ok(()),
+            (Err(_), Some(io)) => Err(WriteFail::Io(io)),
+            (Err(e), None) => Err(WriteFail::Encode(e)),
         }
-        w.flush().map_err(WriteFail::Io)?;
-        Ok(())
-    })
+    } else {
+        // Fast compression: baked maps are large and PNG's best setting is several times
+        // slower for a few percent.
+        let enc = image::codecs::png::PngEncoder::new_with_quality(
+            w,
+            image::codecs::png::CompressionType::Fast,
+            image::codecs::png::FilterType::Adaptive,
+        );
+        enc.write_image(img.as_bytes(), img.width(), img.height(), img.color().into()).map_err(WriteFail::Encode)
+    }
+}
+
+/// A writer that keeps the first I/O error of the writer it wraps (the encoder sees a copy).
+struct RecordingWriter<'a> {
+    inner: &'a mut dyn output::WriteSeek,
+    error: Option<std::io::Error>,
+}
+
+impl RecordingWriter<'_> {
+    fn keep<T>(&mut self, r: std::io::Result<T>) -> std::io::Result<T> {
+        r.map_err(|e| {
+            let copy = std::io::Error::new(e.kind(), e.to_string());
+            self.error.get_or_insert(e);
+            copy
+        })
+    }
+}
+
+impl std::io::Write for RecordingWriter<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let r = self.inner.write(buf);
+        self.keep(r)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        let r = self.inner.flush();
+        self.keep(r)
+    }
+}
+
+impl std::io::Seek for RecordingWriter<'_> {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        let r = self.inner.seek(pos);
+        self.keep(r)
+    }
 }
 
 /// Why the body of an atomic write failed.
@@ -458,48 +751,27 @@ pub enum WriteFail {
 }
 
 /// Runs `body` on a temporary file in `path`'s folder and renames it to `path` on success.
-/// On any failure the temporary file is removed and `path` is untouched.
+/// On any failure the temporary file is removed and `path` is untouched. A one-output
+/// [`output::Outputs`]: an existing device is written in place, a read-only file is refused,
+/// a symbolic link is written through.
 ///
 /// # Errors
-/// [`IoError::Write`] or [`IoError::Encode`] naming `path`.
+/// [`IoError::Output`], [`IoError::Write`] or [`IoError::Encode`] naming `path`.
 pub fn write_atomically(
     path: &Path,
     body: impl FnOnce(&mut std::fs::File) -> Result<(), WriteFail>,
 ) -> Result<(), IoError> {
-    let write_err = |reason| IoError::Write { path: path.to_owned(), reason };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
-        _ => PathBuf::from("."),
-    };
-    if path.is_dir() {
-        return Err(write_err(std::io::Error::new(std::io::ErrorKind::IsADirectory, "it is a folder")));
-    }
-    if !dir.is_dir() {
-        let msg = format!("its folder {} does not exist", dir.display());
-        return Err(write_err(std::io::Error::new(std::io::ErrorKind::NotFound, msg)));
-    }
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".pomkit-").suffix(".tmp");
-    // Temporary files are private (0600) by default; outputs get ordinary permissions, as if
-    // created by a plain open (the umask still applies).
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    let mut tmp = builder.tempfile_in(&dir).map_err(write_err)?;
-    body(tmp.as_file_mut()).map_err(|e| match e {
-        WriteFail::Io(reason) => IoError::Write { path: path.to_owned(), reason },
-        WriteFail::Encode(reason) => IoError::Encode { path: path.to_owned(), reason },
-    })?;
-    tmp.as_file().sync_all().map_err(write_err)?;
-    tmp.persist(path).map_err(|e| write_err(e.error))?;
-    Ok(())
+    let mut outs = output::Outputs::new();
+    let id = outs.output(path);
+    outs.check()?;
+    outs.with_file(id, body)?;
+    outs.commit()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::io::Write;
 
     fn png_bytes(img: &DynamicImage) -> Vec<u8> {
         let mut out = std::io::Cursor::new(Vec::new());
@@ -603,7 +875,7 @@ mod tests {
         assert!(err.to_string().contains(".exr"));
         let missing = dir.path().join("no/such/folder/n.png");
         let err = write_image(&missing, 1, 1, PixelLayout::Gray8, Pixels::U8(&[0])).unwrap_err();
-        assert!(matches!(err, IoError::Write { .. }));
+        assert!(matches!(err, IoError::Output(_)) && err.to_string().contains("does not exist"), "{err}");
         // A failing body leaves neither the destination nor a temporary file.
         let target = dir.path().join("half.png");
         let err = write_atomically(&target, |f| {
@@ -617,6 +889,45 @@ mod tests {
         assert_eq!(left, vec![std::ffi::OsString::from("n.png")]);
         // A folder is not overwritten.
         let err = write_image(dir.path(), 1, 1, PixelLayout::Gray8, Pixels::U8(&[0])).unwrap_err();
-        assert!(matches!(err, IoError::Write { .. } | IoError::UnsupportedOutput { .. }));
+        assert!(matches!(err, IoError::Output(_) | IoError::UnsupportedOutput { .. }));
+    }
+
+    /// A disk that fills after `room` bytes.
+    struct FullDisk {
+        data: std::io::Cursor<Vec<u8>>,
+        room: u64,
+    }
+
+    impl std::io::Write for FullDisk {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if self.data.position() + buf.len() as u64 > self.room {
+                return Err(std::io::Error::from(std::io::ErrorKind::StorageFull));
+            }
+            self.data.write(buf)
+        }
+
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl std::io::Seek for FullDisk {
+        fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+            self.data.seek(pos)
+        }
+    }
+
+    #[test]
+    fn a_full_disk_while_writing_openexr_is_a_write_error_not_a_decoding_one() {
+        let img: DynamicImage = image::Rgb32FImage::from_raw(64, 64, vec![0.5; 64 * 64 * 3]).unwrap().into();
+        let mut disk = FullDisk { data: std::io::Cursor::new(Vec::new()), room: 100 };
+        match encode_image(&mut disk, &img, PixelLayout::RgbF32) {
+            Err(WriteFail::Io(e)) => assert_eq!(e.kind(), std::io::ErrorKind::StorageFull, "{e}"),
+            Err(WriteFail::Encode(e)) => panic!("reported as an encoder error: {e}"),
+            Ok(()) => panic!("the write succeeded on a full disk"),
+        }
+        // With room, the same image encodes.
+        let mut roomy = FullDisk { data: std::io::Cursor::new(Vec::new()), room: u64::MAX };
+        assert!(encode_image(&mut roomy, &img, PixelLayout::RgbF32).is_ok());
     }
 }

@@ -48,7 +48,7 @@ const MAX_NODE_DEPTH: usize = 256;
 #[derive(Debug, thiserror::Error)]
 pub enum MeshLoadError {
     /// The file could not be opened or read.
-    #[error("cannot read {}: {reason}", path.display())]
+    #[error("cannot read {}: {reason}", crate::shown(path))]
     Read {
         /// The file.
         path: PathBuf,
@@ -56,13 +56,13 @@ pub enum MeshLoadError {
         reason: std::io::Error,
     },
     /// The extension is not `.obj`, `.gltf` or `.glb`.
-    #[error("{}: unknown mesh format: expected a .obj, .gltf or .glb file", path.display())]
+    #[error("{}: unknown mesh format: expected a .obj, .gltf or .glb file", crate::shown(path))]
     UnsupportedFormat {
         /// The file.
         path: PathBuf,
     },
     /// The OBJ parser refused the file (bad numbers, faces referring to missing vertices...).
-    #[error("{}: not a valid OBJ file: {reason}", path.display())]
+    #[error("{}: not a valid OBJ file: {reason}", crate::shown(path))]
     Obj {
         /// The file.
         path: PathBuf,
@@ -70,7 +70,7 @@ pub enum MeshLoadError {
         reason: String,
     },
     /// The glTF parser refused the file, or its buffers could not be loaded.
-    #[error("{}: not a valid glTF 2.0 file: {reason}", path.display())]
+    #[error("{}: not a valid glTF 2.0 file: {reason}", crate::shown(path))]
     Gltf {
         /// The file.
         path: PathBuf,
@@ -78,7 +78,7 @@ pub enum MeshLoadError {
         reason: String,
     },
     /// The mesh, or part of it, has no texture coordinates.
-    #[error("{} has no texture coordinates (UVs){detail}: parallax mapping needs them", path.display())]
+    #[error("{} has no texture coordinates (UVs){detail}: parallax mapping needs them", crate::shown(path))]
     NoUvs {
         /// The file.
         path: PathBuf,
@@ -86,14 +86,14 @@ pub enum MeshLoadError {
         detail: String,
     },
     /// The file holds no triangles.
-    #[error("{} has no triangles", path.display())]
+    #[error("{} has no triangles", crate::shown(path))]
     NoTriangles {
         /// The file.
         path: PathBuf,
     },
     /// An attribute is inconsistent: wrong length, out-of-range index, degenerate node
     /// transform, missing positions.
-    #[error("{}: {message}", path.display())]
+    #[error("{}: {message}", crate::shown(path))]
     Invalid {
         /// The file.
         path: PathBuf,
@@ -101,7 +101,7 @@ pub enum MeshLoadError {
         message: String,
     },
     /// The geometry was refused by [`Mesh`] (non-finite positions, bad indices...).
-    #[error("{}: {reason}", path.display())]
+    #[error("{}: {reason}", crate::shown(path))]
     Mesh {
         /// The file.
         path: PathBuf,
@@ -123,12 +123,27 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshLoadError> {
     if !matches!(ext.as_str(), "obj" | "gltf" | "glb") {
         return Err(MeshLoadError::UnsupportedFormat { path: path.to_owned() });
     }
-    let bytes = std::fs::read(path).map_err(|reason| MeshLoadError::Read { path: path.to_owned(), reason })?;
+    // At most MAX_MESH_BYTES: a device or a huge file is refused, not read whole.
+    let bytes = crate::read::read_capped(path, crate::read::MAX_MESH_BYTES, "a mesh file")
+        .map_err(|reason| MeshLoadError::Read { path: path.to_owned(), reason })?;
+    decode_mesh(&bytes, path)
+}
+
+/// [`load_mesh`] from the bytes of a mesh file; `path` names it in errors, its extension picks
+/// the format, and a `.gltf` file's external buffers are read from its folder.
+///
+/// # Errors
+/// As [`load_mesh`].
+pub fn decode_mesh(bytes: &[u8], path: &Path) -> Result<Mesh, MeshLoadError> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    if !matches!(ext.as_str(), "obj" | "gltf" | "glb") {
+        return Err(MeshLoadError::UnsupportedFormat { path: path.to_owned() });
+    }
     // The parsers are third-party code fed untrusted input: a panic in them (an arithmetic
     // overflow on an absurd index, say) becomes an error naming the file, never a crash.
     let parsed = catch_unwind(AssertUnwindSafe(|| match ext.as_str() {
-        "obj" => parse_obj(&bytes, path),
-        _ => parse_gltf(&bytes, path),
+        "obj" => parse_obj(bytes, path),
+        _ => parse_gltf(bytes, path),
     }));
     let raw = match parsed {
         Ok(r) => r?,
@@ -188,6 +203,7 @@ fn base_index(len: usize, path: &Path) -> Result<u32, MeshLoadError> {
 
 /// Parses an OBJ file: all models merged, v flipped to pomkit's convention.
 fn parse_obj(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
+    check_obj_indices(bytes, path)?;
     let mut reader = std::io::BufReader::new(bytes);
     // Materials are not used: refuse to open .mtl files rather than read them for nothing.
     let (models, _materials) =
@@ -243,6 +259,49 @@ fn parse_obj(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
     Ok(raw)
 }
 
+/// Refuses corners of faces (`f` lines, and `l` or `p` lines of three corners or more, which tobj
+/// reads as faces) that point at no position, texture coordinate or normal of the file: index 0,
+/// a relative (negative) one before the first element, or one past the last.
+/// tobj computes with such indices unchecked: an arithmetic overflow, or a wrong element read
+/// (found by the `obj` fuzz target, docs/FUZZING.md). Kinds the file has none of are not
+/// checked, as tobj does not read them.
+fn check_obj_indices(bytes: &[u8], path: &Path) -> Result<(), MeshLoadError> {
+    const KINDS: [(&str, &str); 3] = [("v", "position (v)"), ("vt", "texture coordinate (vt)"), ("vn", "normal (vn)")];
+    let lines = || bytes.split(|&b| b == b'\n').map(String::from_utf8_lossy);
+    let kind = |word: Option<&str>| KINDS.iter().position(|(k, _)| word == Some(*k));
+    let mut total = [0u64; 3];
+    for line in lines() {
+        if let Some(k) = kind(line.split_whitespace().next()) {
+            total[k] += 1;
+        }
+    }
+    let mut seen = [0u64; 3];
+    for (n, line) in lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let first = words.next();
+        if let Some(k) = kind(first) {
+            seen[k] += 1;
+        }
+        if !matches!(first, Some("f" | "l" | "p")) {
+            continue;
+        }
+        for corner in words {
+            for (k, part) in corner.split('/').enumerate().take(3) {
+                // Unparsable corners are tobj's to refuse.
+                let Ok(x) = part.parse::<i64>() else { continue };
+                let fits = if x < 0 { x.unsigned_abs() <= seen[k] } else { x != 0 && x.unsigned_abs() <= total[k] };
+                if !fits && total[k] > 0 {
+                    return Err(MeshLoadError::Invalid {
+                        path: path.to_owned(),
+                        message: format!("line {}: corner {corner:?} refers to no {}", n + 1, KINDS[k].1),
+                    });
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 // ---------------------------------------------------------------------------------------------
 // glTF
 // ---------------------------------------------------------------------------------------------
@@ -257,10 +316,54 @@ struct Part {
 }
 
 /// Parses a `.gltf` or `.glb` file and gathers the triangles of its default scene.
+/// Holds a glTF's buffers to [`crate::read::MAX_MESH_BYTES`] in all before any is read: the
+/// declared lengths, and each external file's size (which must be a regular file, so a device
+/// or a FIFO is never read whole by the glTF reader).
+fn check_buffer_sizes(document: &gltf::Document, base: &Path) -> Result<(), String> {
+    let cap = crate::read::MAX_MESH_BYTES;
+    let fmt = pomkit_core::memory::format_bytes;
+    let declared = document.buffers().map(|b| b.length() as u64).fold(0u64, u64::saturating_add);
+    if declared > cap {
+        return Err(format!("its buffers declare {} in all; a mesh may have at most {}", fmt(declared), fmt(cap)));
+    }
+    for b in document.buffers() {
+        if let gltf::buffer::Source::Uri(uri) = b.source() {
+            if uri.starts_with("data:") {
+                continue;
+            }
+            let file = base.join(uri);
+            // A missing file (or a percent-encoded name) is left to the glTF reader to report.
+            let Ok(meta) = std::fs::metadata(&file) else { continue };
+            if !meta.is_file() {
+                return Err(format!("its buffer {uri} is not a regular file"));
+            }
+            if meta.len() > cap {
+                return Err(format!("its buffer {uri} is {}; a mesh may have at most {}", fmt(meta.len()), fmt(cap)));
+            }
+        }
+    }
+    Ok(())
+}
+
 fn parse_gltf(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
     let gltf_err = |reason: String| MeshLoadError::Gltf { path: path.to_owned(), reason };
-    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(bytes).map_err(|e| gltf_err(e.to_string()))?;
+    // gltf 1.4.1 takes the 12-byte header off a GLB's declared length unchecked (an overflow,
+    // found by the `gltf` fuzz target, docs/FUZZING.md).
+    if let Some(length) = bytes.strip_prefix(b"glTF").and_then(|b| b.get(4..8)) {
+        let declared = u32::from_le_bytes([length[0], length[1], length[2], length[3]]);
+        if declared < 12 {
+            return Err(gltf_err(format!("its GLB header declares {declared} bytes, fewer than the header's 12")));
+        }
+    }
+    // Validated only once the attributes' accessors are known to exist (see
+    // `check_attribute_accessors`); otherwise as `gltf::Gltf::from_slice`.
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| gltf_err(e.to_string()))?;
+    let json = document.into_json();
+    check_attribute_accessors(&json).map_err(gltf_err)?;
+    let document = gltf::Document::from_json(json).map_err(|e| gltf_err(e.to_string()))?;
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    check_buffer_sizes(&document, base).map_err(gltf_err)?;
     let buffers = gltf::import_buffers(&document, Some(base), blob).map_err(|e| {
         let files: Vec<String> = document
             .buffers()
@@ -306,6 +409,24 @@ fn parse_gltf(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
     merge_parts(parts, path)
 }
 
+/// Refuses a primitive attribute that names an accessor the file does not have: gltf-json 1.4.1
+/// validates a `POSITION` accessor by indexing the accessors unchecked, a panic (found by the
+/// `gltf` fuzz target, docs/FUZZING.md).
+fn check_attribute_accessors(json: &gltf::json::Root) -> Result<(), String> {
+    let n = json.accessors.len();
+    for (m, mesh) in json.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(index) = prim.attributes.values().find(|i| i.value() >= n) {
+                return Err(format!(
+                    "meshes[{m}].primitives[{p}]: an attribute refers to accessor {}, but the file has {n}",
+                    index.value()
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// `mesh "name", primitive 2` (or `mesh 0, primitive 2` for an unnamed mesh), for messages.
 fn where_in(mesh: &gltf::Mesh<'_>, prim: usize) -> String {
     match mesh.name() {
@@ -331,6 +452,7 @@ fn read_primitive(
     if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
         return Ok(None);
     }
+    check_accessors(prim, buffers).map_err(invalid)?;
     let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
     let positions: Vec<Vec3> = reader
         .read_positions()
@@ -399,6 +521,50 @@ fn read_primitive(
         None => flat_part(&positions, &uvs, &indices),
     };
     Ok(Some(part))
+}
+
+/// Checks that every accessor of the primitive (its indices and attributes) lies inside its
+/// buffer view, and every such view inside the buffer as loaded: the glTF reader silently
+/// yields nothing for data past the end, which would draw nothing (or the wrong triangles).
+fn check_accessors(prim: &gltf::Primitive<'_>, buffers: &[gltf::buffer::Data]) -> Result<(), String> {
+    let named = prim.attributes().map(|(sem, a)| (sem.to_string(), a));
+    let all = prim.indices().map(|a| ("indices".to_owned(), a)).into_iter().chain(named);
+    for (role, acc) in all {
+        let what = match acc.name() {
+            Some(name) => format!("accessor {} ({name:?}, {role})", acc.index()),
+            None => format!("accessor {} ({role})", acc.index()),
+        };
+        // An accessor without a view (sparse or all zeros) reads no buffer.
+        let Some(view) = acc.view() else { continue };
+        let buffer = view.buffer();
+        let have = buffers.get(buffer.index()).map_or(0, |d| d.0.len() as u64);
+        let view_end = (view.offset() as u64).saturating_add(view.length() as u64);
+        if view_end > have {
+            return Err(format!(
+                "{what}: its buffer view {} spans bytes {} to {view_end}, but buffer {} holds {have} bytes",
+                view.index(),
+                view.offset(),
+                buffer.index()
+            ));
+        }
+        let count = acc.count() as u64;
+        if count == 0 {
+            continue;
+        }
+        let elem = acc.size() as u64;
+        let stride = view.stride().map_or(elem, |s| s as u64);
+        let need = (acc.offset() as u64).saturating_add((count - 1).saturating_mul(stride)).saturating_add(elem);
+        if need > view.length() as u64 {
+            return Err(format!(
+                "{what}: {count} elements of {elem} bytes (stride {stride}) from byte {} need {need} bytes, but its \
+                 buffer view {} holds {}",
+                acc.offset(),
+                view.index(),
+                view.length()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Triangle list from the indices of a `TRIANGLES`, `TRIANGLE_STRIP` or `TRIANGLE_FAN`

@@ -17,10 +17,10 @@
 //! ambient = [0.05, 0.05, 0.06]      # linear RGB, multiplied by the albedo
 //!
 //! [camera]                          # required
-//! eye = [0.0, 2.0, 4.0]             # required
+//! eye = [0.0, 2.0, 4.0]             # required; coordinates at most 1e18 in magnitude
 //! target = [0.0, 0.0, 0.0]          # required; must differ from eye
 //! up = [0.0, 1.0, 0.0]              # must not be parallel to target - eye
-//! fov = 45.0                        # vertical field of view, degrees, in (0, 180)
+//! fov = 45.0                        # vertical field of view, degrees, 1e-3 to 179
 //! near = 0.05                       # near clipping distance, > 0
 //! far = 100.0                       # far clipping distance, > near
 //!
@@ -50,14 +50,14 @@
 //! base_color = [0.8, 0.8, 0.8]      # multiplies the albedo
 //! technique = "pom"                 # flat, normal, parallax, iterative, steep, pom-classic,
 //!                                   # pom, relief or exact
-//! depth_scale = 0.1                 # depth of the deepest point, in UV units; > 0
+//! depth_scale = 0.1                 # depth of the deepest point, in UV units; > 0, <= 16
 //! min_samples = 8                   # pom: fewest samples (head-on)
 //! max_samples = 32                  # pom: most samples (grazing); >= min_samples
 //! samples = 32                      # steep, relief: depth planes
 //! iterations = 4                    # iterative: parallax steps
 //! binary_steps = 6                  # relief: binary refinement steps
 //! refine = 0                        # pom: secant refinement steps
-//! perspective_bias = 1.0            # pom-classic
+//! perspective_bias = 1.0            # pom-classic: 0 to 1 (1 = the exact parallax length)
 //! edges = "wrap"                    # wrap or clamp: texture addressing
 //! shadow = "none"                   # none, hard, soft or exact self-shadowing
 //! softness = 0.1                    # soft: light's angular radius in radians, >= 0
@@ -81,7 +81,7 @@
 //!
 //! `albedo` and `height` also accept `"builtin:NAME"` or `"builtin:NAME:WxH"`, where NAME is a
 //! pattern of [`pomkit_core::procedural`] (bricks, pyramids, cobblestones, text, spike, waves)
-//! and `WxH` the size in texels (default 512x512, each side 1 to 8192). The built-in colour
+//! and `WxH` the size in texels (default 512x512, each side 1 to 16384). The built-in colour
 //! map matches the built-in height map of the same name. `depth_map`, `channel` and
 //! `normalize` describe how to read a height *image*; with a built-in height they are an
 //! error when set to anything but their defaults. `normal` takes files only.
@@ -130,6 +130,11 @@
 //! ([`TraceParams::sanitized`]). A displacing technique written explicitly on a material
 //! without a height map is an error (it would silently render flat).
 //!
+//! What f32 cannot draw is refused, naming the key ([`Scene::check_drawable`], docs/SCENES.md):
+//! `fov` outside 1e-3 to 179 degrees, coordinates beyond 1e18, and triangles that cross the
+//! near plane reaching more than 2^20 times `near` from the eye. Normal-map texels that are not
+//! finite, are zero, or point into the surface are refused naming the texel.
+//!
 //! # Example
 //!
 //! A scene made only of built-in textures and shapes loads without any file:
@@ -174,7 +179,7 @@ use pomkit_core::bake::rebuild_z;
 use pomkit_core::glam::{Mat4, Quat, Vec2, Vec3};
 use pomkit_core::mesh::{MAX_SEGMENTS, Mesh};
 use pomkit_core::procedural::{self, Pattern};
-use pomkit_core::scene::{Camera, Light, Material, NormalMap, Object, Scene, Texture, srgb_to_linear};
+use pomkit_core::scene::{Camera, DrawableError, Light, Material, NormalMap, Object, Scene, Texture, srgb_to_linear};
 use pomkit_core::trace::TraceParamError;
 use pomkit_core::{EdgeMode, HeightField, ShadowMode, Technique, TraceParams};
 use serde::Deserialize;
@@ -186,13 +191,13 @@ use crate::{Channel, HeightLoadOptions, IoError, load_height_field};
 pub const BUILTIN_SIZE: u32 = 512;
 
 /// The largest side of a built-in texture.
-pub const MAX_BUILTIN_SIZE: u32 = 8192;
+pub const MAX_BUILTIN_SIZE: u32 = pomkit_core::MAX_SIZE;
 
 /// Why a scene could not be loaded. Every variant names the scene file.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     /// The scene file could not be read (missing, unreadable, not UTF-8).
-    #[error("cannot read {}: {reason}", path.display())]
+    #[error("cannot read {}: {reason}", crate::shown(path))]
     Read {
         /// The scene file.
         path: PathBuf,
@@ -216,7 +221,7 @@ pub enum SceneError {
     },
     /// A value is out of range, unknown or inconsistent (an unknown technique, a material that
     /// is not defined, `depth_scale = 0`, a NaN, a camera looking at itself...).
-    #[error("{}: {at}: {message}", file.display())]
+    #[error("{}: {at}: {message}", crate::shown(file))]
     Invalid {
         /// The scene file.
         file: PathBuf,
@@ -228,7 +233,9 @@ pub enum SceneError {
         message: String,
     },
     /// A texture the scene refers to could not be loaded.
-    #[error("{}: {at}: {field}: {source}", file.display())]
+    // The cause is part of the message and deliberately not a `source()`: a chain printer
+    // (anyhow's `{:#}`) would print it a second time.
+    #[error("{}: {at}: {field}: {cause}", crate::shown(file))]
     Texture {
         /// The scene file.
         file: PathBuf,
@@ -237,10 +244,10 @@ pub enum SceneError {
         /// `albedo`, `height` or `normal`.
         field: String,
         /// Why the image failed; it names the image file.
-        source: Box<IoError>,
+        cause: Box<IoError>,
     },
     /// A mesh file the scene refers to could not be loaded.
-    #[error("{}: {at}: mesh {mesh:?}: {source}", file.display())]
+    #[error("{}: {at}: mesh {mesh:?}: {cause}", crate::shown(file))]
     Mesh {
         /// The scene file.
         file: PathBuf,
@@ -249,7 +256,7 @@ pub enum SceneError {
         /// The `mesh` value as written.
         mesh: String,
         /// Why the mesh failed; it names the mesh file.
-        source: Box<MeshLoadError>,
+        cause: Box<MeshLoadError>,
     },
 }
 
@@ -274,7 +281,7 @@ fn syntax_message(
     field: Option<&str>,
     message: &str,
 ) -> String {
-    let mut s = file.display().to_string();
+    let mut s = crate::shown(file).to_string();
     if let Some((l, c)) = position {
         write!(s, ": line {l}, column {c}").unwrap_or_default();
     }
@@ -397,9 +404,49 @@ enum NumberOr<A> {
 /// valid TOML, has an unknown field or a value of the wrong type or out of range, refers to an
 /// undefined material, or a texture or mesh it names cannot be loaded.
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|reason| SceneError::Read { path: path.to_owned(), reason })?;
+    let text = read_scene_text(path)?;
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     parse_scene_named(&text, path, base)
+}
+
+/// The text of a scene file: at most [`crate::read::MAX_SCENE_BYTES`] (docs/LIMITS.md), so a
+/// device or a huge file is refused, not read whole; it must be UTF-8.
+fn read_scene_text(path: &Path) -> Result<String, SceneError> {
+    let bytes = crate::read::read_capped(path, crate::read::MAX_SCENE_BYTES, "a scene file")
+        .map_err(|reason| SceneError::Read { path: path.to_owned(), reason })?;
+    String::from_utf8(bytes).map_err(|e| SceneError::Read {
+        path: path.to_owned(),
+        reason: std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()),
+    })
+}
+
+/// The files a scene file reads, without loading them: the scene file itself, then every
+/// texture (albedo, height, normal map) and mesh file it names, resolved as [`load_scene`]
+/// resolves them (built-in maps and shapes are not files). For a program that must not write
+/// over its inputs (`pomkit render -o`); a glTF file's own buffers and images are not listed.
+///
+/// # Errors
+/// [`SceneError::Read`] or [`SceneError::Syntax`], as [`load_scene`] gives them (so scene files
+/// over the size cap of docs/LIMITS.md are refused as unreadable).
+pub fn scene_inputs(path: &Path) -> Result<Vec<PathBuf>, SceneError> {
+    let text = read_scene_text(path)?;
+    let parsed: SceneFile = toml::from_str(&text).map_err(|e| syntax_error(path, &text, &e))?;
+    let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut files = vec![path.to_owned()];
+    let mut add = |value: &str| {
+        if !value.trim().is_empty() && !value.starts_with("builtin:") {
+            files.push(base.join(value));
+        }
+    };
+    for m in &parsed.material {
+        [&m.albedo, &m.height, &m.normal].into_iter().flatten().for_each(|v| add(v));
+    }
+    for o in &parsed.object {
+        if !is_shape(&o.mesh.trim().to_ascii_lowercase()) {
+            add(&o.mesh);
+        }
+    }
+    Ok(files)
 }
 
 /// Parses scene text; relative paths are resolved against `base_dir`. Errors name the scene
@@ -623,9 +670,27 @@ impl Loader<'_> {
         if f.object.is_empty() {
             return Err(self.invalid("scene", "object", "the scene has no [[object]]: it needs at least one"));
         }
+        // The built-in shapes' meshes, checked against the memory budget before any is built.
+        let shapes = f.object.iter().map(shape_bytes).fold(0u64, u64::saturating_add);
+        pomkit_core::memory::check(
+            || format!("building the {} objects' built-in shapes", f.object.len()),
+            shapes,
+            "use fewer segments or rings, or fewer objects",
+        )
+        .map_err(|e| self.invalid("scene", "object", e.to_string()))?;
         let objects =
             f.object.iter().enumerate().map(|(i, o)| self.object(i, o, &materials)).collect::<Result<Vec<_>, _>>()?;
-        Ok(Scene { camera, lights, materials, objects, ambient, background })
+        let scene = Scene { camera, lights, materials, objects, ambient, background };
+        // What f32 cannot draw (docs/SCENES.md), named here with the file; the renderers check
+        // it again for scenes built in code.
+        scene.check_drawable().map_err(|e| match e {
+            DrawableError::Camera { field, message } => self.invalid("camera", field, message),
+            DrawableError::Object { object, message } => {
+                let i = scene.objects.iter().position(|o| o.name == object).unwrap_or(0);
+                self.invalid(&format!("object {} ({object:?})", i + 1), "size", message)
+            }
+        })?;
+        Ok(scene)
     }
 
     fn camera(&self, c: &CameraFile) -> Result<Camera, SceneError> {
@@ -635,30 +700,24 @@ impl Loader<'_> {
         let target = self.vec3(at, "target", c.target)?;
         let up = self.vec3(at, "up", c.up.unwrap_or(d.up.to_array()))?;
         let fov_y_deg = c.fov.unwrap_or(d.fov_y_deg);
-        if !(fov_y_deg.is_finite() && fov_y_deg > 0.0 && fov_y_deg < 180.0) {
-            return Err(self.invalid(at, "fov", format!("fov is {fov_y_deg}: it must be between 0 and 180 degrees")));
-        }
-        let near = self.number(at, "near", c.near.unwrap_or(d.near), 0.0, true)?;
+        let near = c.near.unwrap_or(d.near);
         let far = c.far.unwrap_or(d.far);
-        if !(far.is_finite() && far > near) {
-            return Err(self.invalid(
-                at,
-                "far",
-                format!("far is {far}: it must be finite and greater than near ({near})"),
-            ));
-        }
-        let view = target - eye;
-        if view.length_squared() <= f32::MIN_POSITIVE || !view.is_finite() {
-            return Err(self.invalid(at, "target", format!("target {target} equals eye: the camera looks nowhere")));
-        }
-        if view.normalize().cross(up.normalize_or_zero()).length_squared() < 1e-10 {
+        let camera = Camera { eye, target, up, fov_y_deg, near, far };
+        // The renderers' own checks (pomkit_core::scene::Camera::check): magnitudes of eye and
+        // target first, so a far-away eye is blamed rather than the up vector it breaks.
+        camera.check().map_err(|e| match e {
+            DrawableError::Camera { field, message } => self.invalid(at, field, message),
+            DrawableError::Object { message, .. } => self.invalid(at, "camera", message),
+        })?;
+        let view = (target - eye).normalize();
+        if view.cross(up.normalize_or_zero()).length_squared() < 1e-10 {
             return Err(self.invalid(
                 at,
                 "up",
-                format!("up is {up}: it must not be zero or parallel to the view direction {}", view.normalize()),
+                format!("up is {up}: it must not be zero or parallel to the view direction {view}"),
             ));
         }
-        Ok(Camera { eye, target, up, fov_y_deg, near, far })
+        Ok(camera)
     }
 
     fn light(&self, i: usize, l: &LightFile) -> Result<Light, SceneError> {
@@ -836,7 +895,7 @@ impl Loader<'_> {
                                     file: self.file.to_owned(),
                                     at: at.to_owned(),
                                     field: "normal".to_owned(),
-                                    source: Box::new(source),
+                                    cause: Box::new(source),
                                 })?);
                             self.cache.normals.insert(key, map.clone());
                             Some(map)
@@ -883,6 +942,13 @@ impl Loader<'_> {
     fn source(&self, at: &str, field: &str, value: &str) -> Result<Source, SceneError> {
         if value.trim().is_empty() {
             return Err(self.invalid(at, field, format!("{field} is empty: expected a file name or builtin:NAME")));
+        }
+        if value.contains('\0') {
+            return Err(self.invalid(
+                at,
+                field,
+                format!("{field} {value:?}: a file name cannot contain a NUL byte (\\u{{0}})"),
+            ));
         }
         let Some(rest) = value.strip_prefix("builtin:") else {
             return Ok(Source::File(self.base.join(value)));
@@ -935,7 +1001,7 @@ impl Loader<'_> {
                 file: self.file.to_owned(),
                 at: at.to_owned(),
                 field: "height".to_owned(),
-                source: Box::new(source),
+                cause: Box::new(source),
             })?,
         };
         let field = Arc::new(field);
@@ -957,7 +1023,7 @@ impl Loader<'_> {
                 file: self.file.to_owned(),
                 at: at.to_owned(),
                 field: "albedo".to_owned(),
-                source: Box::new(source),
+                cause: Box::new(source),
             })?,
         };
         let texture = Arc::new(texture);
@@ -1113,6 +1179,13 @@ impl Loader<'_> {
     }
 
     fn mesh_file(&mut self, at: &str, value: &str) -> Result<Arc<Mesh>, SceneError> {
+        if value.contains('\0') {
+            return Err(self.invalid(
+                at,
+                "mesh",
+                format!("mesh {value:?}: a file name cannot contain a NUL byte (\\u{{0}})"),
+            ));
+        }
         let path = self.base.join(value);
         if let Some(m) = self.cache.meshes.get(&path) {
             return Ok(m.clone());
@@ -1132,12 +1205,30 @@ impl Loader<'_> {
             file: self.file.to_owned(),
             at: at.to_owned(),
             mesh: value.to_owned(),
-            source: Box::new(source),
+            cause: Box::new(source),
         })?;
         let mesh = Arc::new(mesh);
         self.cache.meshes.insert(path, mesh.clone());
         Ok(mesh)
     }
+}
+
+/// An upper bound on the memory building an object's built-in shape takes (0 for mesh files,
+/// which are held to their own cap): its vertices and triangles (a grid of its segment counts,
+/// clamped as the loader will, plus poles and caps) twice over, for the buffers growing while it
+/// is built and the tangent computation.
+fn shape_bytes(o: &ObjectFile) -> u64 {
+    let count = |v: Option<u32>, default: u32| u64::from(v.unwrap_or(default).clamp(1, MAX_SEGMENTS));
+    let (a, b) = match o.mesh.trim().to_ascii_lowercase().as_str() {
+        "plane" => (count(o.segments, 1), count(o.segments, 1)),
+        "disc" => (1, count(o.segments, 64)),
+        "sphere" => (count(o.rings, 32), count(o.segments, 64)),
+        "cylinder" => (3, count(o.segments, 64)),
+        "torus" => (count(o.segments, 64), count(o.tube_segments, 32)),
+        "quad" | "cube" => (6, 1),
+        _ => return 0,
+    };
+    Mesh::bytes_for((a + 3) * (b + 3), 2 * (a + 1) * (b + 1)).saturating_mul(2)
 }
 
 /// Whether `name` (lowercase) is a built-in shape.
@@ -1151,12 +1242,14 @@ fn is_shape(name: &str) -> bool {
 
 /// Opens and decodes an image, refusing empty ones.
 fn open_image(path: &Path) -> Result<DynamicImage, IoError> {
-    let bytes = std::fs::read(path).map_err(|reason| IoError::Read { path: path.to_owned(), reason })?;
-    let img = image::ImageReader::new(std::io::Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|reason| IoError::Read { path: path.to_owned(), reason })?
-        .decode()
-        .map_err(|reason| IoError::Decode { path: path.to_owned(), reason })?;
+    let bytes = crate::read::read_image_file(path)?;
+    decode_image(&bytes, path)
+}
+
+/// Decodes the bytes of an image file named `path`, refusing empty images.
+fn decode_image(bytes: &[u8], path: &Path) -> Result<DynamicImage, IoError> {
+    // After decoding: a converted copy and the texture's linear floats, 24 bytes per pixel.
+    let img = crate::read::decode_image_limited(bytes, path, 24)?;
     if img.width() == 0 || img.height() == 0 {
         return Err(IoError::Empty { path: path.to_owned(), width: img.width(), height: img.height() });
     }
@@ -1209,14 +1302,49 @@ pub fn load_color_texture(path: &Path) -> Result<Texture, IoError> {
 ///
 /// 8- and 16-bit RGB images hold `n * 0.5 + 0.5`; when the blue channel is zero everywhere the
 /// map is a two-channel one and z is rebuilt from x and y. Float (EXR) images hold the vectors
-/// themselves. Vectors are renormalized; unusable ones become +Z.
+/// themselves. Vectors are renormalized. A texel that is not finite, is the zero vector, or
+/// points into the surface (`z / |n|` below `-`[`NORMAL_Z_TOLERANCE`], one 8-bit step, e.g. an
+/// 8-bit blue below 127) is refused; a `z` just below 0 (rounding of a horizontal normal) is
+/// clamped to 0 (docs/SCENES.md).
 ///
 /// # Errors
-/// [`IoError::Read`], [`IoError::Decode`], [`IoError::Empty`], or
-/// [`IoError::UnsupportedPixels`] for a greyscale image (probably a height map), naming
-/// `path`.
+/// [`IoError::Read`], [`IoError::Decode`], [`IoError::Empty`],
+/// [`IoError::UnsupportedPixels`] for a greyscale image (probably a height map), or
+/// [`IoError::BadNormal`] naming the texel, each naming `path`.
 pub fn load_normal_map(path: &Path, y_down: bool) -> Result<NormalMap, IoError> {
-    let img = open_image(path)?;
+    let bytes = crate::read::read_image_file(path)?;
+    decode_normal_map(&bytes, path, y_down)
+}
+
+/// How far below the surface (as `z / |n|`) a stored normal may point and still be taken as
+/// rounding of a horizontal one (then clamped to `z = 0`): one step of an 8-bit channel.
+pub const NORMAL_Z_TOLERANCE: f32 = 1.0 / 127.5;
+
+/// A normal map's texel `(x, y)` as a unit vector pointing out of the surface, or the reason it
+/// is none: not finite, zero length, or `z` below `-NORMAL_Z_TOLERANCE` (a tangent-space normal
+/// pointing into the surface, e.g. an 8-bit blue below 127: probably not a tangent-space normal
+/// map, or a mis-encoded one). Slightly negative `z` is clamped to 0.
+fn checked_normal(n: Vec3, path: &Path, x: u32, y: u32) -> Result<Vec3, IoError> {
+    let bad = |reason: &'static str| IoError::BadNormal { path: path.to_owned(), x, y, value: n.to_array(), reason };
+    if !n.is_finite() {
+        return Err(bad("normals must be finite"));
+    }
+    let len = n.length();
+    if len <= 1e-6 {
+        return Err(bad("a zero vector is no direction"));
+    }
+    if n.z < -NORMAL_Z_TOLERANCE * len {
+        return Err(bad("it points into the surface (z < 0); tangent-space normals point out of it"));
+    }
+    Ok(Vec3::new(n.x, n.y, n.z.max(0.0)).normalize_or(Vec3::Z))
+}
+
+/// [`load_normal_map`] from the bytes of an image file; `path` names it in errors.
+///
+/// # Errors
+/// As [`load_normal_map`], but for [`IoError::Read`].
+pub fn decode_normal_map(bytes: &[u8], path: &Path, y_down: bool) -> Result<NormalMap, IoError> {
+    let img = decode_image(bytes, path)?;
     if !img.color().has_color() {
         return Err(IoError::UnsupportedPixels {
             path: path.to_owned(),
@@ -1227,13 +1355,12 @@ pub fn load_normal_map(path: &Path, y_down: bool) -> Result<NormalMap, IoError> 
     let float = is_float(&img);
     let rgb = img.to_rgb32f();
     let two_channel = !float && rgb.pixels().all(|p| p.0[2] == 0.0);
-    let normals = rgb
-        .pixels()
-        .map(|p| {
-            let [x, y, z] = if float { p.0 } else { p.0.map(|c| c * 2.0 - 1.0) };
-            let y = if y_down { -y } else { y };
-            if two_channel { rebuild_z(Vec2::new(x, y)) } else { Vec3::new(x, y, z) }
-        })
-        .collect();
+    let mut normals = Vec::with_capacity(w as usize * h as usize);
+    for (x, y, p) in rgb.enumerate_pixels() {
+        let [nx, ny, nz] = if float { p.0 } else { p.0.map(|c| c * 2.0 - 1.0) };
+        let ny = if y_down { -ny } else { ny };
+        let n = if two_channel { rebuild_z(Vec2::new(nx, ny)) } else { Vec3::new(nx, ny, nz) };
+        normals.push(checked_normal(n, path, x, y)?);
+    }
     NormalMap::new(w, h, normals).ok_or_else(|| IoError::Empty { path: path.to_owned(), width: w, height: h })
 }
