@@ -750,6 +750,17 @@ pub enum WriteFail {
     Encode(image::ImageError),
 }
 
+impl WriteFail {
+    /// The [`IoError`] this failure is when writing `path`.
+    #[must_use]
+    pub fn naming(self, path: &Path) -> IoError {
+        match self {
+            WriteFail::Io(reason) => IoError::Write { path: path.to_owned(), reason },
+            WriteFail::Encode(reason) => IoError::Encode { path: path.to_owned(), reason },
+        }
+    }
+}
+
 /// Runs `body` on a temporary file in `path`'s folder and renames it to `path` on success.
 /// On any failure the temporary file is removed and `path` is untouched. A one-output
 /// [`output::Outputs`]: an existing device is written in place, a read-only file is refused,

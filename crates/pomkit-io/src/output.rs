@@ -277,10 +277,7 @@ impl Outputs {
         body: impl FnOnce(&mut dyn WriteSeek) -> Result<(), WriteFail>,
     ) -> Result<(), IoError> {
         let path = self.slots[id.0].path.clone();
-        let fail = |e: WriteFail| match e {
-            WriteFail::Io(reason) => IoError::Write { path: path.clone(), reason },
-            WriteFail::Encode(reason) => IoError::Encode { path: path.clone(), reason },
-        };
+        let fail = |e: WriteFail| e.naming(&path);
         match self.sink(id)? {
             Sink::Staged(file) => {
                 let mut w = BufWriter::new(file);
@@ -304,10 +301,7 @@ impl Outputs {
         body: impl FnOnce(&mut File) -> Result<(), WriteFail>,
     ) -> Result<(), IoError> {
         let path = self.slots[id.0].path.clone();
-        let fail = |e: WriteFail| match e {
-            WriteFail::Io(reason) => IoError::Write { path: path.clone(), reason },
-            WriteFail::Encode(reason) => IoError::Encode { path: path.clone(), reason },
-        };
+        let fail = |e: WriteFail| e.naming(&path);
         match self.sink(id)? {
             Sink::Staged(file) => body(file).map_err(fail),
             Sink::Device(mut file) => body(&mut file).map_err(fail),
