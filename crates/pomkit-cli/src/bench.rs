@@ -1,6 +1,6 @@
 //! `pomkit bench`: whole frames of the built-in demo scene, timed per technique on the GPU
 //! renderer (GPU timestamp queries around its passes) and on the CPU renderer (wall clock around
-//! the render call), side by side (DESIGN section 8: medians measured in one run, with the
+//! the render call), side by side (docs/BENCHMARKS.md: medians measured in one run, with the
 //! fetches that explain them).
 
 use std::io::Write;
@@ -284,7 +284,7 @@ fn caption(
     parts.join(" ")
 }
 
-/// Times `runs` GPU frames of `opts` after a warm-up (DESIGN section 8: prepare once, draw
+/// Times `runs` GPU frames of `opts` after a warm-up (docs/BENCHMARKS.md: prepare once, draw
 /// repeatedly), reporting each on standard error.
 fn gpu_frames(gpu: &mut GpuRenderer, scene: &Scene, opts: &RenderOptions, name: &str, runs: u32) -> Result<GpuStats> {
     let fail = || format!("cannot render ({name}) on the GPU");

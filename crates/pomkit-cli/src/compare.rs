@@ -1,4 +1,4 @@
-//! `pomkit compare`: the accuracy table (DESIGN section 5): each technique's error against
+//! `pomkit compare`: the accuracy table (ARCHITECTURE.md, Stable interfaces): each technique's error against
 //! `exact` and its fetches per ray, per view angle, on a fixed random set of rays.
 
 use std::io::Write;

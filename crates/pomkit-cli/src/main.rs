@@ -1,5 +1,5 @@
 //! `pomkit`: the command line. Thin: every verb parses its flags, calls pomkit-core and
-//! pomkit-io, and reports. The flag names and formats are stable (DESIGN section 5).
+//! pomkit-io, and reports. The flag names and formats are stable (ARCHITECTURE.md, Stable interfaces).
 
 mod backend;
 mod bake;

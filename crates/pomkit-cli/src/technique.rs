@@ -1,4 +1,4 @@
-//! The technique options shared by `trace`, `compare` and (later) `render` (DESIGN section 5),
+//! The technique options shared by `trace`, `compare` and (later) `render` (ARCHITECTURE.md, Stable interfaces),
 //! and the parsing of technique names.
 
 use anyhow::{Result, bail};

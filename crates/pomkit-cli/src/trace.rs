@@ -1,5 +1,5 @@
 //! `pomkit trace`: rays from a CSV file traced with one technique; hits to a CSV file
-//! (DESIGN section 5).
+//! (ARCHITECTURE.md, Stable interfaces).
 
 use std::fs::File;
 use std::io::{BufRead, BufReader};

@@ -1,5 +1,5 @@
 //! `pomkit bake` and `pomkit generate` end to end: outputs decode to what core computes, and bad
-//! input fails with a clear message and leaves no file behind (DESIGN section 6).
+//! input fails with a clear message and leaves no file behind (docs/LIMITS.md).
 
 use std::path::Path;
 use std::process::{Command, Output};

@@ -1,6 +1,6 @@
 //! `pomkit bench` end to end: the CSV table has the promised header and one row per technique
 //! with sane numbers, fetches agree with what the techniques are (normal mapping reads no
-//! heights), and bad input fails with a clear message before any work (DESIGN section 6). The
+//! heights), and bad input fails with a clear message before any work (docs/LIMITS.md). The
 //! CPU tests pin `--backend cpu`; the GPU tests print "skipping: <reason>" and pass when the
 //! machine has no adapter (the binary says so), unless `POMKIT_REQUIRE_GPU=1`.
 //!

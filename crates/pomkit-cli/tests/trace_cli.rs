@@ -1,6 +1,6 @@
 //! `pomkit trace` and `pomkit compare` end to end: hits equal what core computes for the same
-//! rays, the table formats are what DESIGN section 5 promises, and bad input fails with a clear
-//! message and leaves no file behind (DESIGN section 6).
+//! rays, the table formats are what the README and ARCHITECTURE.md promise, and bad input fails with a clear
+//! message and leaves no file behind (docs/LIMITS.md).
 
 use std::path::Path;
 use std::process::{Command, Output};

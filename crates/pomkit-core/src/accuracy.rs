@@ -1,6 +1,6 @@
 //! Accuracy: how far each technique's hits land from the exact ones, and what they cost.
 //!
-//! The measure is DESIGN section 2's "error": the distance in texels between a technique's hit
+//! The measure is the "error" of docs/ACCURACY.md: the distance in texels between a technique's hit
 //! UV and the [`Technique::Exact`] hit UV for the same ray. [`compare`] traces a fixed random set
 //! of rays per view angle ([`ray_set`], reproducible from a seed by the small [`SplitMix64`]
 //! generator, so no random-number crate is needed) and reports, per technique and angle, the

@@ -687,7 +687,7 @@ mod tests {
         }
     }
 
-    /// DESIGN section 2's bump test, shaded on a plane by a minimal Lambert helper: a raised
+    /// the bump test (ARCHITECTURE.md, Conventions), shaded on a plane by a minimal Lambert helper: a raised
     /// bump lit from +x is brighter on its +x side, lit from "up the image" brighter on its top.
     ///
     /// The plane maps u to world +x and v to world -y (image top at +y), so T = +x, B = +y,

@@ -1,13 +1,13 @@
 //! Height fields: storage, edge modes, nearest and bilinear sampling, mip chains.
 //!
-//! Conventions (DESIGN section 2):
+//! Conventions (ARCHITECTURE.md):
 //! - pomkit stores *depth* `d` in `[0, 1]`: 0 is the polygon's surface, 1 the deepest point.
 //!   Height `h = 1 - d` (white = high in an ordinary height map).
 //! - UV `(0, 0)` is the top-left corner of the image; texel `(i, j)` (column `i`, row `j`) has
 //!   its centre at `((i + 0.5) / w, (j + 0.5) / h)`. Bilinear filtering interpolates between
 //!   texel centres, as a GPU does.
 //! - Any size is allowed, not only powers of two (Lengyel's `& (size - 1)` wrap is erratum 5 in
-//!   DESIGN section 4: pomkit wraps with a Euclidean remainder).
+//!   docs/REFERENCES.md, Errata: pomkit wraps with a Euclidean remainder).
 
 use glam::Vec2;
 

@@ -4,7 +4,7 @@
 //! for triangle meshes, normal and parallax map baking, and procedural height maps. No file I/O
 //! lives here: `pomkit-io` turns files into these types.
 //!
-//! Conventions are those of DESIGN section 2: tangent space x = T (along +u), y = B (up the
+//! Conventions are those of ARCHITECTURE.md: tangent space x = T (along +u), y = B (up the
 //! image, along -v), z = N; depth `d` in `[0, 1]` with 0 at the polygon's surface; UV `(0, 0)` at
 //! the top-left corner of the image.
 //!

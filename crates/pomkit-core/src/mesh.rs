@@ -1,7 +1,7 @@
 //! Triangle meshes for parallax mapping: vertex frames, the world size of a UV unit, primitive
 //! shapes, transforms, and truly displaced geometry (the `displaced` technique's ground truth).
 //!
-//! # Conventions (DESIGN section 2)
+//! # Conventions (ARCHITECTURE.md)
 //!
 //! - Triangles are wound counter-clockwise seen from the front, the side their normals point to.
 //! - Tangents are glTF's: `xyz` is the unit tangent T along increasing u, perpendicular to the unit
@@ -360,7 +360,7 @@ impl Mesh {
 
     /// True geometry for the `displaced` technique: every triangle subdivided finely and each
     /// vertex moved into the surface by the height field, so that rasterizing it shows what
-    /// parallax mapping approximates (seed 004's experiment of 1,100 against 1.5 million
+    /// parallax mapping approximates (Tatarchuk 2006's experiment of 1,100 against 1.5 million
     /// polygons).
     ///
     /// # Subdivision

@@ -1,7 +1,7 @@
 //! Procedural height maps and matching albedo (colour) maps.
 //!
 //! Every pattern is a function of the texel centre's UV, `u = (x + 0.5) / w`, `v = (y + 0.5) / h`
-//! (DESIGN section 2: `(0, 0)` is the top-left corner, `v` runs down the rows). Bricks,
+//! (ARCHITECTURE.md, Conventions: `(0, 0)` is the top-left corner, `v` runs down the rows). Bricks,
 //! pyramids, cobblestones and waves are periodic in `u` and `v` with period 1, so they tile
 //! seamlessly at any size, powers of two or not: the texel after the last column continues the
 //! first one. Text and spike are not periodic but are flat along the border, so they tile too.

@@ -1,6 +1,6 @@
 //! Tangent frames for triangle meshes: area-weighted vertex normals and per-vertex tangents.
 //!
-//! # Conventions (DESIGN section 2)
+//! # Conventions (ARCHITECTURE.md)
 //!
 //! Tangent space is glTF 2.0's: x = T, y = B, z = N. A vertex tangent is a [`Vec4`] whose `xyz`
 //! is the unit tangent T, perpendicular to the unit vertex normal N, and whose `w` is the
@@ -24,7 +24,7 @@
 //! per-triangle tangent and bitangent from eq. 7.37, summed per vertex, then Gram-Schmidt
 //! (eq. 7.38) and the handedness from the sign of `det(M_tangent)` (eq. 7.40).
 //!
-//! # Errata (DESIGN section 4)
+//! # Errata (docs/REFERENCES.md, Errata)
 //!
 //! Lengyel's Listing 7.4 prints `x1 = w1.x - w1.x` and `y2 = w2.y - w1.y`; they are misprints of
 //! `w1.x - w0.x` and `w2.y - w0.y`, which is what eq. 7.34 says and what [`compute_tangents`]
@@ -355,7 +355,7 @@ fn lengyel_tangents(mesh: &Mesh<'_>, weld_cos: Option<f32>) -> Vec<Vec4> {
 /// With `e1 = p1 - p0`, `e2 = p2 - p0`, `(x_k, y_k) = uv_k - uv_0` (eq. 7.34; Listing 7.4 has
 /// `x1 = w1.x - w1.x` and `y2 = w2.y - w1.y`, misprints of `w1.x - w0.x` and `w2.y - w0.y`):
 /// `t = (y2 e1 - y1 e2) / det`, `b = (x1 e2 - x2 e1) / det`, `det = x1 y2 - x2 y1`.
-/// The y are differences of `v' = 1 - v` (DESIGN section 2), so b points along decreasing v.
+/// The y are differences of `v' = 1 - v` (ARCHITECTURE.md, Conventions), so b points along decreasing v.
 fn lengyel_sums(mesh: &Mesh<'_>) -> (Vec<DVec3>, Vec<DVec3>) {
     let n = mesh.positions.len();
     let (mut tsum, mut bsum) = (vec![DVec3::ZERO; n], vec![DVec3::ZERO; n]);
@@ -507,7 +507,7 @@ impl mikktspace::Geometry for MikkAdapter<'_> {
     }
 
     fn tex_coord(&self, face: usize, vert: usize) -> [f32; 2] {
-        // v' = 1 - v (DESIGN section 2): MikkTSpace's bitangent then points along decreasing
+        // v' = 1 - v (ARCHITECTURE.md, Conventions): MikkTSpace's bitangent then points along decreasing
         // v and an unmirrored quad is orientation preserving (w = +1).
         self.mesh
             .uvs

@@ -1,13 +1,13 @@
 //! Tracing: where does a ray entering a height-mapped polygon meet the displaced surface?
 //!
-//! Every technique of DESIGN section 3 is a pure function of (surface, ray, parameters) that
+//! Every technique of docs/REFERENCES.md is a pure function of (surface, ray, parameters) that
 //! returns a [`Hit`] and counts its height fetches. The renderers call these functions per pixel
 //! (the GPU calls their WGSL twins).
 //!
 //! # The ray
 //! A [`Ray`] enters the polygon at `uv` with direction `(du, dv, dz)`: along +u, +v and along the
 //! tangent-space normal, so `dz < 0` points into the surface. Depth `z` in `[0, 1]` is reached at
-//! `uv + z * depth_scale * (du, dv) / -dz` (DESIGN section 2). Directions need not be unit length.
+//! `uv + z * depth_scale * (du, dv) / -dz` (ARCHITECTURE.md, Conventions). Directions need not be unit length.
 //! Rays with `dz >= 0` do not enter the surface: every technique returns the entry point, depth 0,
 //! with no fetch. Rays flatter than [`MIN_COS`] are steepened to it (about 89.94 degrees from the
 //! normal) so that every trace is finite.
@@ -26,8 +26,8 @@ use crate::pyramid::MaxHeightPyramid;
 /// The flattest ray accepted, as `-dz` of the unit direction; flatter rays are steepened to it.
 pub const MIN_COS: f32 = 1e-3;
 
-/// The most samples any technique takes in one trace; larger requests are clamped (DESIGN
-/// section 6, "huge sample counts").
+/// The most samples any technique takes in one trace; larger requests are clamped (docs/LIMITS.md,
+/// "Parameters").
 pub const MAX_SAMPLES: u32 = 1024;
 
 /// The deepest relief accepted: `depth_scale` is at most this many UV units (tile widths).
@@ -91,12 +91,12 @@ pub struct Hit {
     pub uv: Vec2,
     /// Depth of the hit point on the ray, in `[0, 1]`.
     pub depth: f32,
-    /// Height fetches made (DESIGN section 2: a filtered sample, a gather or a pyramid texel
+    /// Height fetches made (ARCHITECTURE.md, Conventions: a filtered sample, a gather or a pyramid texel
     /// read each count 1).
     pub fetches: u32,
 }
 
-/// The tracing techniques of DESIGN section 3.
+/// The tracing techniques of docs/REFERENCES.md.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Technique {
     /// Plain texturing: no offset, geometric normal. 0 fetches.
@@ -574,7 +574,7 @@ fn trace_entering(surface: &Surface, uv0: Vec2, dir: Vec3, technique: Technique,
         }
         Technique::Steep => {
             // McGuire 2005: march depth planes 0, 1/n, ... until the surface is at or above the
-            // plane. Erratum (DESIGN 4): the loop is capped; the plane at depth 1 is always at or
+            // plane. Erratum (docs/REFERENCES.md, Errata): the loop is capped; the plane at depth 1 is always at or
             // below the surface, so it needs no fetch.
             let n = p.samples;
             let mut fetches = 0;
@@ -642,7 +642,7 @@ fn pom_classic(surface: &Surface, uv0: Vec2, dir: Vec3, p: &TraceParams) -> Hit 
     Hit { uv: uv0 + s, depth: 1.0, fetches: n }
 }
 
-/// The adaptive sample count of Tatarchuk 2006 eq. (1), with the erratum of DESIGN section 4
+/// The adaptive sample count of Tatarchuk 2006 eq. (1), with the erratum of docs/REFERENCES.md
 /// fixed: `n_max` at grazing angles (N.V = 0), `n_min` head-on (N.V = 1).
 #[must_use]
 pub fn adaptive_samples(cos_view: f32, min_samples: u32, max_samples: u32) -> u32 {

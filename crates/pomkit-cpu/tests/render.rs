@@ -1,4 +1,4 @@
-//! The CPU renderer against independent truths: the bump test of DESIGN section 2 on a plane, a
+//! The CPU renderer against independent truths: the bump test (ARCHITECTURE.md, Conventions) on a plane, a
 //! cube face and a sphere; mirrored UVs; parallax against real displaced geometry.
 
 use std::sync::Arc;

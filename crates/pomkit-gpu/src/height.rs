@@ -223,7 +223,7 @@ pub struct HeightPassOptions {
     /// (the default), clamp otherwise. Must match the sampler the tracer uses, or border cells
     /// of the pyramid bound the wrong surface.
     pub edges: EdgeMode,
-    /// How far, in UV units, the deepest point lies below the surface (DESIGN section 2; default
+    /// How far, in UV units, the deepest point lies below the surface (ARCHITECTURE.md, Conventions; default
     /// 0.1). The normals are baked at Lengyel's scale `depth_scale * width` texel widths, so they
     /// match the displaced geometry; the parallax value (G) depends on it through `n_z`.
     /// Non-finite or non-positive values are replaced by 0.1, as `TraceParams::sanitized` does.

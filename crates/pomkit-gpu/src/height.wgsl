@@ -12,7 +12,7 @@
 //   pyramid_base_main  pyramid.rs `MaxHeightPyramid::new`, level 0 (nine-point minimum)
 //   pyramid_reduce_main                                         coarser levels (minimum of 4)
 //
-// Conventions (DESIGN section 2): depth d in [0, 1], 0 = the polygon's surface; texel (x, y) is
+// Conventions (ARCHITECTURE.md): depth d in [0, 1], 0 = the polygon's surface; texel (x, y) is
 // column x, row y, row 0 at the top of the image (v = 0); tangent-space y runs *up* the image.
 // Every read is a `textureLoad` of one texel: no sampler, no filtering, so the results do not
 // depend on the hardware's filtering precision.
@@ -39,7 +39,7 @@ const FILTER_CENTRAL: u32 = 0u;
 const FILTER_SOBEL: u32 = 1u;
 
 /// Texel coordinate `i` mapped into `0..n` by wrapping (a Euclidean remainder, so any size works:
-/// DESIGN section 4, Lengyel's `& (size - 1)` erratum) or clamping. HeightField::depth_at.
+/// docs/REFERENCES.md, Errata, Lengyel's `& (size - 1)` erratum) or clamping. HeightField::depth_at.
 fn resolve(i: i32, n: i32, edges: u32) -> i32 {
     if edges == EDGES_WRAP {
         // WGSL's % truncates toward zero; adding n once makes it Euclidean.

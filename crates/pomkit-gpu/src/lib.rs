@@ -1,6 +1,6 @@
 //! pomkit-gpu: the wgpu/WGSL renderer.
 //!
-//! The same system as `pomkit-cpu`, on the GPU: every technique of DESIGN section 3 as a
+//! The same system as `pomkit-cpu`, on the GPU: every technique of docs/REFERENCES.md as a
 //! pipeline variant (a WGSL `override` constant), hard, soft and exact self-shadows, the LOD
 //! fade and its tint view, Blinn-Phong shading and pixel depth offset; compute passes that
 //! rebuild a height map's mips, normals, parallax map and maximum-height pyramid on the GPU, so

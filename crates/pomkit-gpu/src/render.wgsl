@@ -1,7 +1,7 @@
-// pomkit's material shader: every tracing technique of DESIGN section 3 on the GPU.
+// pomkit's material shader: every tracing technique of docs/REFERENCES.md on the GPU.
 //
 // This file is the WGSL twin of pomkit-core's `trace.rs` and `shadow.rs` and of pomkit-cpu's
-// fragment stage (`shade`). Conventions (DESIGN section 2): tangent space x = T, y = B, z = N;
+// fragment stage (`shade`). Conventions (ARCHITECTURE.md): tangent space x = T, y = B, z = N;
 // a tangent-space direction (x, y, z) moves in UV by (x, -y); the height texture holds depth
 // d in [0, 1] (0 = the polygon's surface); a ray entering at uv0 with unit direction
 // (du, dv, dz), dz < 0, is at depth z at uv0 + z * depth_scale * (du, dv) / -dz.
@@ -297,7 +297,7 @@ fn line_intersection(t0: f32, d0: f32, t1: f32, d1: f32) -> f32 {
     return t1;
 }
 
-/// Tatarchuk 2006 eq. (1) with DESIGN's erratum fixed: n_max at grazing angles, n_min head-on.
+/// Tatarchuk 2006 eq. (1) with the erratum of docs/REFERENCES.md fixed: n_max at grazing angles, n_min head-on.
 fn adaptive_samples(cos_view: f32, n_min: u32, n_max: u32) -> u32 {
     let c = clamp(cos_view, 0.0, 1.0);
     let n = f32(n_max) + (f32(n_min) - f32(n_max)) * c;
@@ -332,7 +332,7 @@ fn trace_iterative(uv0: vec2<f32>, dir: vec3<f32>, s: vec2<f32>) -> Hit {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Steep parallax (McGuire 2005). Erratum (DESIGN 4): the loop is capped; the plane at depth 1
+// Steep parallax (McGuire 2005). Erratum (docs/REFERENCES.md, Errata): the loop is capped; the plane at depth 1
 // is always at or below the surface and needs no fetch.
 // ---------------------------------------------------------------------------------------------
 

@@ -1,6 +1,6 @@
 //! The GPU renderer against the CPU renderer (the independent truth here: a different
 //! implementation of the same techniques, in f64/f32 Rust rather than WGSL), and against the
-//! bump test of DESIGN section 2.
+//! bump test (ARCHITECTURE.md, Conventions).
 //!
 //! Runs on any adapter, Mesa's lavapipe included. Where no adapter exists each test prints why
 //! and passes, unless `POMKIT_REQUIRE_GPU=1` (set by `.ci/run`), where it fails.
@@ -192,7 +192,7 @@ fn brightness_at(out: &RenderOutput, cam: &Camera, p: Vec3) -> f32 {
     out.color[i as usize].dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 
-/// DESIGN section 2's bump test on the GPU: lit from the surface's +T side a raised bump is
+/// the bump test (ARCHITECTURE.md, Conventions) on the GPU: lit from the surface's +T side a raised bump is
 /// brighter on its +T side, lit from +B brighter on its +B side; on a plane, a cube face and a
 /// sphere, with normal mapping and POM. The pictures also agree with the CPU's.
 #[test]

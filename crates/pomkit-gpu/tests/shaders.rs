@@ -1,4 +1,4 @@
-//! Every WGSL file in the repository parses and validates with naga (DESIGN section 7).
+//! Every WGSL file in the repository parses and validates with naga (docs/GPU.md).
 
 use std::path::{Path, PathBuf};
 

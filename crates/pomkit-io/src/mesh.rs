@@ -6,7 +6,7 @@
 //! # UV convention
 //!
 //! pomkit's UVs are glTF's: `(0, 0)` is the top-left corner of the image and v runs down the
-//! rows (DESIGN section 2). glTF files are read as they are. OBJ files store v *up* the image
+//! rows (ARCHITECTURE.md, Conventions). glTF files are read as they are. OBJ files store v *up* the image
 //! (OpenGL's convention, `(0, 0)` at the bottom-left), so the OBJ reader flips it: `v' = 1 - v`.
 //! A texture that looks right on an OBJ model in Blender or any OpenGL viewer therefore looks
 //! right in pomkit too.

@@ -66,7 +66,7 @@ fn obj_quad_is_triangulated_with_v_flipped() {
         assert!(close(mesh.normals[i], Vec3::Z));
     }
     assert_frames_sane(&mesh);
-    // An unmirrored quad: T along +X (u grows to the right), w = +1 (DESIGN section 2).
+    // An unmirrored quad: T along +X (u grows to the right), w = +1 (ARCHITECTURE.md, Conventions).
     for t in &mesh.tangents {
         assert!(close(t.truncate(), Vec3::X), "{t}");
         assert_eq!(t.w, 1.0);
