@@ -8,6 +8,7 @@
 
 pub mod context;
 pub mod height;
+pub mod library;
 pub mod material;
 pub mod renderer;
 pub mod util;

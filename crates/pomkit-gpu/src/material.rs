@@ -12,7 +12,6 @@ use glam::{Mat3, Mat4, Vec3};
 use pomkit_core::bake::NormalFilter;
 use pomkit_core::mesh::Mesh;
 use pomkit_core::scene::{Camera, Light, Material, NormalMap, Texture};
-use pomkit_core::shadow::ShadowMode;
 use pomkit_core::trace::Technique;
 use pomkit_core::{EdgeMode, HeightField};
 use wgpu::util::DeviceExt;
@@ -24,30 +23,8 @@ use crate::{GpuContext, GpuError};
 /// Lights the shader reads per frame.
 pub const MAX_LIGHTS: usize = 4;
 
-/// The value of the shader's `TECHNIQUE` override constant.
-#[must_use]
-pub fn technique_index(t: Technique) -> u32 {
-    match t {
-        Technique::Flat => 0,
-        Technique::Normal => 1,
-        Technique::Parallax => 2,
-        Technique::Iterative => 3,
-        Technique::Steep => 4,
-        Technique::PomClassic => 5,
-        Technique::Pom => 6,
-        Technique::Relief => 7,
-        Technique::Exact => 8,
-    }
-}
-
-fn shadow_index(m: ShadowMode) -> u32 {
-    match m {
-        ShadowMode::None => 0,
-        ShadowMode::Hard => 1,
-        ShadowMode::Soft => 2,
-        ShadowMode::Exact => 3,
-    }
-}
+use crate::library::PomkitParams;
+pub use crate::library::technique_index;
 
 /// The render targets a pipeline draws into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -65,6 +42,9 @@ pub struct Targets {
 /// f16 (fetch counts are exact up to 2048). With an `Rgba16Float` colour target the three stay
 /// within WebGPU's default 32 bytes of colour attachments per sample.
 pub const AOV_FORMATS: [wgpu::TextureFormat; 2] = [wgpu::TextureFormat::Rgba32Float, wgpu::TextureFormat::Rgba16Float];
+
+/// pomkit's own material shader; the library is composed in front of it.
+pub const RENDER_WGSL: &str = include_str!("render.wgsl");
 
 /// Vertex layout: position, normal, tangent (xyz, w handedness), uv, uv scale, depth.
 const VERTEX_FLOATS: usize = 15;
@@ -165,7 +145,10 @@ impl MaterialPipelines {
     #[must_use]
     pub fn new(ctx: &GpuContext) -> Self {
         let device = &ctx.device;
-        let shader = device.create_shader_module(wgpu::include_wgsl!("render.wgsl"));
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("pomkit material (render.wgsl + the shader library)"),
+            source: wgpu::ShaderSource::Wgsl(crate::library::compose(RENDER_WGSL).into()),
+        });
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("pomkit frame"),
             entries: &[uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT)],
@@ -450,19 +433,9 @@ impl GpuMaterial {
         let field = material.height.as_deref();
         let has_normals = explicit_normals.is_some() || field.is_some_and(|f| f.width() >= 2 && f.height() >= 2);
         let mut u = Std140::new();
+        u.raw(&PomkitParams::from_material(material, technique).to_bytes());
         u.vec4(material.base_color.extend(1.0).to_array());
-        u.f(material.specular).f(material.shininess).f(p.depth_scale).f(material.lod_threshold);
-        u.u(p.min_samples).u(p.max_samples).u(p.samples).u(p.iterations);
-        u.u(p.binary_steps).u(p.refine).u(shadow_index(material.shadow.mode)).u(match p.edges {
-            EdgeMode::Wrap => 0,
-            EdgeMode::Clamp => 1,
-        });
-        let softness = if material.shadow.softness.is_finite() { material.shadow.softness } else { 0.1 };
-        u.f(p.perspective_bias).f(softness).u(u32::from(field.is_some())).u(u32::from(has_normals));
-        let (hw, hh) = field.map_or((1, 1), |f| (f.width(), f.height()));
-        let max_level = (hw.max(hh) as f32).log2().floor();
-        let levels = height.as_ref().map_or(1, |m| m.pyramid_levels);
-        u.f(hw as f32).f(hh as f32).f(max_level).u(levels);
+        u.f(material.specular).f(material.shininess).u(u32::from(field.is_some())).u(u32::from(has_normals));
         u.f(albedo[0].width() as f32).f(albedo[0].height() as f32).f((albedo.len() - 1) as f32);
         u.u(u32::from(material.pixel_depth_offset));
         let uniforms = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -64,6 +64,13 @@ impl Std140 {
         self.fs(&m.to_cols_array())
     }
 
+    /// Appends a nested struct's bytes (a whole number of 16-byte rows, 16-byte aligned).
+    pub fn raw(&mut self, bytes: &[u8]) -> &mut Self {
+        self.pad_to(16);
+        self.words.extend(bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])));
+        self
+    }
+
     /// Pads with zeros to a multiple of `align` bytes.
     pub fn pad_to(&mut self, align: usize) -> &mut Self {
         while (self.words.len() * 4) % align != 0 {

@@ -1,4 +1,6 @@
-//! Every WGSL file in the repository parses and validates with naga (docs/GPU.md).
+//! Every WGSL file in the repository parses and validates with naga (docs/GPU.md). A file whose
+//! first line is `// uses: pomkit.wgsl` is validated with the shader library composed in front
+//! of it, as the program that loads it does.
 
 use std::path::{Path, PathBuf};
 
@@ -31,7 +33,8 @@ fn every_wgsl_file_validates() {
     );
     let mut failures = Vec::new();
     for f in &files {
-        let src = std::fs::read_to_string(f).expect("readable shader");
+        let own = std::fs::read_to_string(f).expect("readable shader");
+        let src = if own.starts_with("// uses: pomkit.wgsl") { pomkit_gpu::library::compose(&own) } else { own };
         let module = match naga::front::wgsl::parse_str(&src) {
             Ok(m) => m,
             Err(e) => {

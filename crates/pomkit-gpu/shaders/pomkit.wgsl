@@ -1,0 +1,975 @@
+// pomkit shader library, plain WGSL: generated from crates/pomkit-gpu/shaders/pomkit/*.wesl by
+// pomkit_gpu::library::flatten (do not edit; `UPDATE_SHADERS=1 cargo test -p pomkit-gpu --test
+// library` rewrites it). Paste it in front of your shader; docs/EMBEDDING.md shows how.
+
+// ===== module common =====
+
+// pomkit shader library: constants, parameters, results and the ray set-up every module shares.
+//
+// Conventions (ARCHITECTURE.md, Conventions; docs/EMBEDDING.md for a host renderer):
+// - Tangent space: x = T, y = B, z = N (out of the surface), B = w * cross(N, T) with w the
+//   vertex tangent's handedness (glTF). T points along +u, B along -v (up the image), so a
+//   tangent-space direction (x, y, z) moves in UV by (x, -y).
+// - The height texture holds depth d in [0, 1]: 0 is the polygon's surface, 1 the deepest point.
+// - `depth_scale`: how far, in UV units, the deepest point lies below the surface. A ray
+//   entering at uv0 with unit direction (du, dv, dz), dz < 0, in "ray terms" (u, v, depth) is at
+//   depth z at uv0 + z * depth_scale * (du, dv) / -dz.
+//
+// Every function is pure: it reads heights only through the textures and sampler it is given,
+// and the library has no module-level variables. Names start with `pomkit_` (`POMKIT_` for
+// constants), so the plain-WGSL form (pomkit.wgsl) can be pasted in front of any shader.
+
+// ---------------------------------------------------------------------------------------------
+// Techniques and shadow modes (pomkit_core's `Technique` and `ShadowMode`; a naga test keeps
+// these equal to the Rust side)
+// ---------------------------------------------------------------------------------------------
+
+const POMKIT_FLAT: u32 = 0u;
+const POMKIT_NORMAL: u32 = 1u;
+const POMKIT_PARALLAX: u32 = 2u;
+const POMKIT_ITERATIVE: u32 = 3u;
+const POMKIT_STEEP: u32 = 4u;
+const POMKIT_POM_CLASSIC: u32 = 5u;
+const POMKIT_POM: u32 = 6u;
+const POMKIT_RELIEF: u32 = 7u;
+const POMKIT_EXACT: u32 = 8u;
+
+const POMKIT_SHADOW_NONE: u32 = 0u;
+const POMKIT_SHADOW_HARD: u32 = 1u;
+const POMKIT_SHADOW_SOFT: u32 = 2u;
+const POMKIT_SHADOW_EXACT: u32 = 3u;
+
+/// `PomkitParams::edges`: the height map repeats (the sampler must use `repeat`).
+const POMKIT_WRAP: u32 = 0u;
+/// `PomkitParams::edges`: the height map's border texels extend outward (`clamp-to-edge`).
+const POMKIT_CLAMP: u32 = 1u;
+
+/// The flattest ray accepted, as -dz of the unit direction (pomkit_core trace.rs `MIN_COS`).
+const POMKIT_MIN_COS: f32 = 1e-3;
+/// Most iterations of the exact walk before it gives up and reports the point reached. The
+/// CPU's cap grows with the map; a shader needs a fixed bound. Typical rays take tens.
+const POMKIT_EXACT_MAX_STEPS: u32 = 4096u;
+/// Stand-in for infinity (clamped border cells reach outward forever).
+const POMKIT_BIG: f32 = 1e30;
+
+// ---------------------------------------------------------------------------------------------
+// Parameters and results
+// ---------------------------------------------------------------------------------------------
+
+/// A material's tracing parameters: 64 bytes, laid out for a uniform buffer (all members are
+/// 4-byte scalars), written by `pomkit_gpu::library::PomkitParams`. The meaning, range and
+/// default of each is pomkit_core's `TraceParams` (docs/SCENES.md).
+struct PomkitParams {
+    /// Which technique `pomkit_trace` runs (`POMKIT_FLAT` .. `POMKIT_EXACT`).
+    technique: u32,
+    /// Which self-shadow `pomkit_shadow` computes (`POMKIT_SHADOW_*`).
+    shadow_mode: u32,
+    /// `POMKIT_WRAP` or `POMKIT_CLAMP`; the sampler's address mode must match.
+    edges: u32,
+    /// Adaptive sample count of `pom` and of hard/soft shadows: used head-on ...
+    min_samples: u32,
+    /// ... and at grazing angles.
+    max_samples: u32,
+    /// Fixed layer count of `steep` and `relief`.
+    samples: u32,
+    /// Iterations of `iterative`.
+    iterations: u32,
+    /// Binary-search steps of `relief`.
+    binary_steps: u32,
+    /// Secant refinements of `pom`.
+    refine: u32,
+    /// UV distance of the deepest point below the surface.
+    depth_scale: f32,
+    /// Brawley's perspective bias of `pom-classic`, in [0, 1].
+    perspective_bias: f32,
+    /// Penumbra width of soft shadows (radians of light elevation).
+    softness: f32,
+    /// Mip level up to which the full technique runs; it fades out over the next level.
+    lod_threshold: f32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+/// Where a view ray meets the height field.
+struct PomkitHit {
+    /// The hit's UV: sample every texture of the material here.
+    uv: vec2<f32>,
+    /// The hit's depth in [0, 1] below the surface.
+    depth: f32,
+    /// Texture reads made (the GPU's count: one filtered sample, or one texel load, each).
+    fetches: u32,
+}
+
+/// The visibility of a light from a traced point.
+struct PomkitShadow {
+    /// 1 lit, 0 shadowed, between for soft shadows.
+    visibility: f32,
+    /// Texture reads made.
+    fetches: u32,
+}
+
+/// The height map's size as the tracers need it (from the textures themselves).
+struct PomkitMap {
+    /// Width and height in texels.
+    size: vec2<f32>,
+    /// The last mip level of the height texture.
+    max_level: f32,
+    /// Mip levels of the maximum-height pyramid.
+    pyramid_levels: u32,
+    /// `POMKIT_WRAP` or `POMKIT_CLAMP`.
+    edges: u32,
+}
+
+/// The sizes of `heights` and `pyramid`.
+fn pomkit_map(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams) -> PomkitMap {
+    let size = vec2<f32>(textureDimensions(heights, 0));
+    return PomkitMap(size, f32(textureNumLevels(heights)) - 1.0, textureNumLevels(pyramid), params.edges);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Vectors and frames
+// ---------------------------------------------------------------------------------------------
+
+/// `v` normalized, or `fallback` when `v` is zero, tiny or huge.
+fn pomkit_safe_normalize(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
+    let l2 = dot(v, v);
+    if l2 > 1e-30 && l2 < 1e30 {
+        return v * inverseSqrt(l2);
+    }
+    return fallback;
+}
+
+/// A unit vector orthogonal to the unit vector `n` (glam's `any_orthonormal_vector`, Duff et
+/// al. 2017, so the CPU and the GPU pick the same).
+fn pomkit_any_orthonormal(n: vec3<f32>) -> vec3<f32> {
+    let s = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    return vec3<f32>(b, s + n.y * n.y * a, -n.y);
+}
+
+/// An orthonormal tangent frame.
+struct PomkitFrame {
+    t: vec3<f32>,
+    b: vec3<f32>,
+    n: vec3<f32>,
+    /// The tangent's handedness w, +1 or -1.
+    sign: f32,
+}
+
+/// The tangent frame (T, B, N) re-orthonormalized from an interpolated normal and a glTF
+/// tangent (xyz, w = handedness): B = w * cross(N, T) (Lengyel, Listing 7.8).
+fn pomkit_tangent_frame(normal: vec3<f32>, tangent: vec4<f32>) -> PomkitFrame {
+    let n = pomkit_safe_normalize(normal, vec3<f32>(0.0, 0.0, 1.0));
+    let t_raw = tangent.xyz;
+    let t = pomkit_safe_normalize(t_raw - n * dot(n, t_raw), pomkit_any_orthonormal(n));
+    let sign = select(1.0, -1.0, tangent.w < 0.0);
+    return PomkitFrame(t, cross(n, t) * sign, n, sign);
+}
+
+/// A world vector in the frame's tangent space (T, B, N components).
+fn pomkit_to_tangent(f: PomkitFrame, v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(v, f.t), dot(v, f.b), dot(v, f.n));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rays: tangent space to "ray terms" (u, v, depth)
+// ---------------------------------------------------------------------------------------------
+
+/// A tangent-space vector (T, B, N components) in ray terms (u, v, depth): the UV axes are
+/// stretched by the surface's UV scale (the world length of one UV unit along u and v; pass
+/// vec2(1.0) where UVs are not stretched), and B points up the image, along -v.
+fn pomkit_light_ray(ts: vec3<f32>, uv_scale: vec2<f32>) -> vec3<f32> {
+    let s = clamp(uv_scale, vec2<f32>(1e-12), vec2<f32>(1e12));
+    return vec3<f32>(ts.x * sqrt(s.y / s.x), -ts.y * sqrt(s.x / s.y), ts.z);
+}
+
+/// The view ray of a pixel for `pomkit_trace`: `view_ts` is the eye-to-point vector in tangent
+/// space (any length). Returns the unit direction in ray terms, steepened to `POMKIT_MIN_COS`,
+/// with w = 1; or w = 0 when the ray does not enter the surface (it comes from below or is
+/// zero).
+fn pomkit_view_ray(view_ts: vec3<f32>, uv_scale: vec2<f32>) -> vec4<f32> {
+    let dir = pomkit_light_ray(view_ts, uv_scale);
+    let l2 = dot(dir, dir);
+    if !(l2 > 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let d = dir * inverseSqrt(l2);
+    if d.z >= 0.0 {
+        return vec4<f32>(0.0);
+    }
+    if -d.z >= POMKIT_MIN_COS {
+        return vec4<f32>(d, 1.0);
+    }
+    let xy = d.xy;
+    let lxy = length(xy);
+    var dxy = vec2<f32>(0.0);
+    if lxy > 0.0 {
+        dxy = xy / lxy * sqrt(1.0 - POMKIT_MIN_COS * POMKIT_MIN_COS);
+    }
+    return vec4<f32>(dxy, -POMKIT_MIN_COS, 1.0);
+}
+
+/// The world length of one UV unit along u and v, from screen-space derivatives of the world
+/// position and the UV (`dpdx`, `dpdy`), for hosts whose vertices carry no UV scale. Exact on a
+/// flat triangle; returns vec2(1.0) where the UV mapping is degenerate.
+fn pomkit_uv_scale(dworld_dx: vec3<f32>, dworld_dy: vec3<f32>, duv_dx: vec2<f32>, duv_dy: vec2<f32>) -> vec2<f32> {
+    // d(world) = J d(uv) with J = [dP/du dP/dv]; solve from the two screen directions.
+    let det = duv_dx.x * duv_dy.y - duv_dx.y * duv_dy.x;
+    if !(abs(det) > 1e-20) {
+        return vec2<f32>(1.0);
+    }
+    let dp_du = (dworld_dx * duv_dy.y - dworld_dy * duv_dx.y) / det;
+    let dp_dv = (dworld_dy * duv_dx.x - dworld_dx * duv_dy.x) / det;
+    let s = vec2<f32>(length(dp_du), length(dp_dv));
+    if !(s.x > 0.0 && s.y > 0.0 && s.x < 1e30 && s.y < 1e30) {
+        return vec2<f32>(1.0);
+    }
+    return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Height reads: one filtered fetch at a mip level fixed before any loop (the tex2Dgrad of
+// docs/REFERENCES.md). textureSampleLevel is allowed in non-uniform control flow.
+// ---------------------------------------------------------------------------------------------
+
+/// Depth at `uv` (R of the height texture), filtered at mip `lod`.
+fn pomkit_depth_at(heights: texture_2d<f32>, samp: sampler, uv: vec2<f32>, lod: f32) -> f32 {
+    return textureSampleLevel(heights, samp, uv, lod).r;
+}
+
+/// Parallax value clamp(n_z * d, 0, 1) at `uv` (G of the height texture; Lengyel 7.51).
+fn pomkit_parallax_at(heights: texture_2d<f32>, samp: sampler, uv: vec2<f32>, lod: f32) -> f32 {
+    return textureSampleLevel(heights, samp, uv, lod).g;
+}
+
+// ===== module lod =====
+
+// pomkit shader library: the height map's mip level and the LOD fade (Tatarchuk 2006, section
+// 3.3; docs/REFERENCES.md).
+//
+// Call `pomkit_mip_level` with gradients taken in uniform control flow (`dpdx(uv)`, `dpdy(uv)`
+// at the top of the fragment shader), then trace at that level: the level stays fixed for the
+// whole ray, as the seeds' tex2Dgrad.
+
+/// Mip level for isotropic filtering of a `size`-texel texture with `max_level` as its last
+/// level, from the UV gradients (pomkit_core heightfield.rs `mip_level_from_gradients`).
+fn pomkit_mip_level_sized(duv_dx: vec2<f32>, duv_dy: vec2<f32>, size: vec2<f32>, max_level: f32) -> f32 {
+    let rho2 = max(dot(duv_dx * size, duv_dx * size), dot(duv_dy * size, duv_dy * size));
+    if !(rho2 > 1.0) || rho2 > 1e30 {
+        return 0.0;
+    }
+    return clamp(0.5 * log2(rho2), 0.0, max(max_level, 0.0));
+}
+
+/// Mip level of the height texture `heights` from the UV gradients.
+fn pomkit_mip_level(heights: texture_2d<f32>, duv_dx: vec2<f32>, duv_dy: vec2<f32>) -> f32 {
+    let size = vec2<f32>(textureDimensions(heights, 0));
+    return pomkit_mip_level_sized(duv_dx, duv_dy, size, f32(textureNumLevels(heights)) - 1.0);
+}
+
+/// Weight of the full technique in the LOD fade: 1 up to mip level `threshold - 1`, falling to
+/// 0 at `threshold`. Blend `mix(plain, traced, weight)`; skip the trace where it is 0.
+fn pomkit_lod_weight(level: f32, threshold: f32) -> f32 {
+    return clamp(threshold - level, 0.0, 1.0);
+}
+
+// ===== module exact =====
+
+// pomkit shader library: the exact tracer's walk. A maximum-height pyramid traversal (after
+// Tevs, Ihrke & Seidel 2008) with ray / bilinear-patch quadratics, the twin of pomkit_core
+// trace.rs `exact_first_hit` (docs/REFERENCES.md).
+//
+// Differences from the CPU (which works in f64): f32 throughout, so the nudge that picks the
+// cell a ray enters is 1e-3 texel rather than 1e-9, and the walk is capped at
+// POMKIT_EXACT_MAX_STEPS. Fetches are counted as the CPU counts them: one gather per 2x2
+// sibling block of pyramid cells and one per bilinear patch, kept while the ray walks between
+// them.
+//
+// Coordinates: texel units, x along u and y along v (texel (i, j) has its centre at
+// (i + 0.5, j + 0.5)); z is depth in [0, 1]. A ray is o + t d.
+
+
+/// A pyramid cell: its index and its walls in unbounded texel coordinates.
+struct PomkitCell {
+    ix: i32,
+    iy: i32,
+    lo: vec2<f32>,
+    hi: vec2<f32>,
+}
+
+/// The result of a walk: the ray parameter of the first hit (-1 when none) and the fetches.
+struct PomkitWalk {
+    t: f32,
+    fetches: u32,
+}
+
+/// What the walk remembers between patches: fetches so far and the patch last read.
+struct PomkitWalkState {
+    fetches: u32,
+    last_patch: vec2<i32>,
+}
+
+fn pomkit_level_cells(n: i32, level: u32) -> i32 {
+    let size = 1 << level;
+    return (n + size - 1) / size;
+}
+
+/// One axis of `pomkit_cell_at`: the cell index and its walls.
+fn pomkit_cell_axis(p: f32, n: i32, level: u32, edges: u32) -> vec3<f32> {
+    let size = 1 << level;
+    let cells = pomkit_level_cells(n, level);
+    let fp = floor(p);
+    if edges == POMKIT_WRAP {
+        let tile = floor(fp / f32(n));
+        let local = clamp(i32(fp - tile * f32(n)), 0, n - 1);
+        let c = min(local / size, cells - 1);
+        let base = tile * f32(n);
+        return vec3<f32>(f32(c), base + f32(c * size), base + f32(min((c + 1) * size, n)));
+    }
+    let local = i32(clamp(fp, 0.0, f32(n - 1)));
+    let c = min(local / size, cells - 1);
+    var lo = f32(c * size);
+    var hi = f32(min((c + 1) * size, n));
+    if c == 0 {
+        lo = -POMKIT_BIG;
+    }
+    if c == cells - 1 {
+        hi = POMKIT_BIG;
+    }
+    return vec3<f32>(f32(c), lo, hi);
+}
+
+fn pomkit_cell_at(map: PomkitMap, level: u32, p: vec2<f32>) -> PomkitCell {
+    let size = vec2<i32>(map.size);
+    let ax = pomkit_cell_axis(p.x, size.x, level, map.edges);
+    let ay = pomkit_cell_axis(p.y, size.y, level, map.edges);
+    return PomkitCell(i32(ax.x), i32(ay.x), vec2<f32>(ax.y, ay.y), vec2<f32>(ax.z, ay.z));
+}
+
+/// Where the ray leaves cell `c`, no earlier than `t` and no later than `t1`.
+fn pomkit_exit_time(c: PomkitCell, o: vec3<f32>, d: vec3<f32>, t: f32, t1: f32) -> f32 {
+    var te = t1;
+    if d.x > 0.0 {
+        te = min(te, (c.hi.x - o.x) / d.x);
+    } else if d.x < 0.0 {
+        te = min(te, (c.lo.x - o.x) / d.x);
+    }
+    if d.y > 0.0 {
+        te = min(te, (c.hi.y - o.y) / d.y);
+    } else if d.y < 0.0 {
+        te = min(te, (c.lo.y - o.y) / d.y);
+    }
+    return max(te, t);
+}
+
+/// The 2x2 sibling block holding cell `c` (one gather reads all four).
+fn pomkit_block_key(map: PomkitMap, c: PomkitCell, level: u32) -> vec2<i32> {
+    if map.edges == POMKIT_WRAP {
+        let size = f32(1 << level);
+        return vec2<i32>(
+            i32(round(c.lo.x - f32(c.ix % 2) * size)),
+            i32(round(c.lo.y - f32(c.iy % 2) * size)),
+        );
+    }
+    return vec2<i32>(c.ix / 2, c.iy / 2);
+}
+
+/// Depth of mip-0 texel (i, j) with the map's edge mode.
+fn pomkit_texel_depth(heights: texture_2d<f32>, map: PomkitMap, i: i32, j: i32) -> f32 {
+    let size = vec2<i32>(map.size);
+    var p = vec2<i32>(i, j);
+    if map.edges == POMKIT_WRAP {
+        p = ((p % size) + size) % size;
+    } else {
+        p = clamp(p, vec2<i32>(0), size - 1);
+    }
+    return textureLoad(heights, p, 0).r;
+}
+
+/// First t in [ta, tb] where the ray is at or below the bilinear patch holding the segment's
+/// midpoint (trace.rs `patch_hit`); -1 when none.
+fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32) -> f32 {
+    let mid = o + d * (0.5 * (ta + tb));
+    let i = floor(mid.x - 0.5);
+    let j = floor(mid.y - 0.5);
+    let key = vec2<i32>(i32(i), i32(j));
+    if any(key != (*state).last_patch) {
+        (*state).last_patch = key;
+        (*state).fetches += 1u;
+    }
+    let s00 = pomkit_texel_depth(heights, map, key.x, key.y);
+    let s10 = pomkit_texel_depth(heights, map, key.x + 1, key.y);
+    let s01 = pomkit_texel_depth(heights, map, key.x, key.y + 1);
+    let s11 = pomkit_texel_depth(heights, map, key.x + 1, key.y + 1);
+    let a = s00;
+    let b = s10 - s00;
+    let c = s01 - s00;
+    let e = s00 - s10 - s01 + s11;
+    let fx0 = o.x - (i + 0.5);
+    let fy0 = o.y - (j + 0.5);
+    // g(t) = z(t) - S(x(t), y(t)) = qa t^2 + qb t + qc; at or below the surface where g >= 0.
+    let qa = -e * d.x * d.y;
+    let qb = d.z - b * d.x - c * d.y - e * (fx0 * d.y + fy0 * d.x);
+    let qc = o.z - (a + b * fx0 + c * fy0 + e * fx0 * fy0);
+    if (qa * ta + qb) * ta + qc >= 0.0 {
+        return ta;
+    }
+    var best = POMKIT_BIG;
+    let scale = max(max(abs(qb), abs(qc)), 1e-30);
+    if abs(qa) <= 1e-6 * scale {
+        if qb != 0.0 {
+            let r = -qc / qb;
+            if r > ta && r <= tb {
+                best = r;
+            }
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let sq = sqrt(disc);
+            let q = -0.5 * (qb + select(-1.0, 1.0, qb >= 0.0) * sq);
+            var r1 = -qb / (2.0 * qa);
+            var r2 = r1;
+            if q != 0.0 {
+                r1 = q / qa;
+                r2 = qc / q;
+            }
+            if r1 > ta && r1 <= tb {
+                best = min(best, r1);
+            }
+            if r2 > ta && r2 <= tb {
+                best = min(best, r2);
+            }
+        }
+    }
+    if best < POMKIT_BIG {
+        return best;
+    }
+    if (qa * tb + qb) * tb + qc >= 0.0 {
+        return tb;
+    }
+    return -1.0;
+}
+
+/// The patches a ray crosses inside one texel footprint (trace.rs `leaf_hit`): split at the
+/// texel-centre lines, at most three segments.
+fn pomkit_leaf_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32, c: PomkitCell) -> f32 {
+    var centre = c.lo + 0.5;
+    if map.edges != POMKIT_WRAP {
+        centre = vec2<f32>(f32(c.ix), f32(c.iy)) + 0.5;
+    }
+    var cut0 = tb;
+    var cut1 = tb;
+    if d.x != 0.0 {
+        let tc = (centre.x - o.x) / d.x;
+        if tc > ta && tc < tb {
+            cut0 = tc;
+        }
+    }
+    if d.y != 0.0 {
+        let tc = (centre.y - o.y) / d.y;
+        if tc > ta && tc < tb {
+            cut1 = tc;
+        }
+    }
+    let ends = array<f32, 3>(min(cut0, cut1), max(cut0, cut1), tb);
+    var start = ta;
+    for (var k = 0u; k < 3u; k++) {
+        let end = ends[k];
+        if end <= start && !(end == tb && start == ta) {
+            continue;
+        }
+        let h = pomkit_patch_hit(heights, map, state, o, d, start, end);
+        if h >= 0.0 {
+            return h;
+        }
+        start = end;
+    }
+    return -1.0;
+}
+
+/// First t in [t0, t1] where the ray o + t d (texel x, y; depth z) is at or below the bilinear
+/// surface of the mip-0 texels of `heights`; t = -1 when it stays above. `pyramid` holds the
+/// least depth of each cell, level l in mip l (pomkit_gpu's `HeightMaps::pyramid`).
+fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> PomkitWalk {
+    let top = map.pyramid_levels - 1u;
+    var blocks = array<vec2<i32>, 16>();
+    for (var k = 0u; k < 16u; k++) {
+        blocks[k] = vec2<i32>(-2147483647);
+    }
+    var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
+    let speed = max(max(abs(d.x), abs(d.y)), 1.0);
+    let nudge = max(1e-3 / speed, 1e-7);
+    var t = t0;
+    var level = 0u;
+    for (var it = 0u; it < POMKIT_EXACT_MAX_STEPS; it++) {
+        if t > t1 {
+            break;
+        }
+        let probe = o + d * min(t + nudge, t1);
+        let c = pomkit_cell_at(map, level, probe.xy);
+        let t_exit = pomkit_exit_time(c, o, d, t, t1);
+        let key = pomkit_block_key(map, c, level);
+        let slot = min(level, 15u);
+        if any(blocks[slot] != key) {
+            blocks[slot] = key;
+            state.fetches += 1u;
+        }
+        let bound = textureLoad(pyramid, vec2<i32>(c.ix, c.iy), i32(level)).r;
+        var deepest = o.z + d.z * t;
+        if d.z >= 0.0 {
+            deepest = o.z + d.z * t_exit;
+        }
+        if deepest < bound {
+            if t_exit >= t1 {
+                break;
+            }
+            if level < top {
+                let parent = pomkit_cell_at(map, level + 1u, probe.xy);
+                if pomkit_exit_time(parent, o, d, t, t1) <= t_exit {
+                    level += 1u;
+                }
+            }
+            t = t_exit;
+            continue;
+        }
+        if level > 0u {
+            if d.z > 0.0 {
+                t = max(t, (bound - o.z) / d.z);
+            }
+            level -= 1u;
+            continue;
+        }
+        let h = pomkit_leaf_hit(heights, map, &state, o, d, t, t_exit, c);
+        if h >= 0.0 {
+            return PomkitWalk(h, state.fetches);
+        }
+        if t_exit >= t1 {
+            break;
+        }
+        t = t_exit;
+    }
+    return PomkitWalk(-1.0, state.fetches);
+}
+
+// ===== module trace =====
+
+// pomkit shader library: every tracing technique of docs/REFERENCES.md, the WGSL twins of
+// pomkit_core's trace.rs (tests/library_rays.rs compares them ray by ray).
+//
+// Each technique is a function of the textures, the parameters, the entry UV and an entering
+// unit direction in ray terms (from `pomkit_view_ray`), returning the hit UV, its depth and the
+// fetches made. `pomkit_trace` picks one by `technique`: pass a constant or an `override` to
+// compile only that technique's loop, or `params.technique` to choose at run time.
+
+
+// ---------------------------------------------------------------------------------------------
+// Shared pieces
+// ---------------------------------------------------------------------------------------------
+
+/// The point of the ray at a UV offset (trace.rs `hit_on_ray`); `head_on` is the depth used
+/// when the ray has no UV extent.
+fn pomkit_hit_on_ray(uv0: vec2<f32>, s: vec2<f32>, offset: vec2<f32>, head_on: f32, fetches: u32) -> PomkitHit {
+    let len2 = dot(s, s);
+    var z = head_on;
+    if len2 > 1e-20 {
+        z = dot(offset, s) / len2;
+    }
+    z = clamp(z, 0.0, 1.0);
+    return PomkitHit(uv0 + s * z, z, fetches);
+}
+
+/// Intersection of the ray z = t with the line through (t0, d0) and (t1, d1).
+fn pomkit_line_intersection(t0: f32, d0: f32, t1: f32, d1: f32) -> f32 {
+    let a = d0 - t0;
+    let b = t1 - d1;
+    let denom = a + b;
+    if denom > 0.0 {
+        return t0 + (t1 - t0) * (a / denom);
+    }
+    return t1;
+}
+
+/// Tatarchuk 2006 eq. (1) with the erratum of docs/REFERENCES.md fixed: `n_max` samples at
+/// grazing angles, `n_min` head-on.
+fn pomkit_adaptive_samples(cos_view: f32, n_min: u32, n_max: u32) -> u32 {
+    let c = clamp(cos_view, 0.0, 1.0);
+    let n = f32(n_max) + (f32(n_min) - f32(n_max)) * c;
+    return clamp(u32(round(n)), max(min(n_min, n_max), 1u), max(n_max, 1u));
+}
+
+/// The UV offset of the whole depth range along the ray: the ray is at depth z at uv0 + s * z.
+fn pomkit_ray_extent(dir: vec3<f32>, depth_scale: f32) -> vec2<f32> {
+    return dir.xy * (depth_scale / -dir.z);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Parallax mapping with offset limiting (Kaneko 2001; Welsh 2004)
+// ---------------------------------------------------------------------------------------------
+
+fn pomkit_trace_parallax(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
+    // Welsh drops the division by V.z: the shift never exceeds depth * depth_scale.
+    let s = pomkit_ray_extent(dir, params.depth_scale);
+    let d = pomkit_depth_at(heights, samp, uv0, lod);
+    return pomkit_hit_on_ray(uv0, s, dir.xy * (d * params.depth_scale), d * -dir.z, 1u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Iterative parallax (Lengyel, FGED 2, Listing 7.9, in the depth convention)
+// ---------------------------------------------------------------------------------------------
+
+fn pomkit_trace_iterative(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
+    let s = pomkit_ray_extent(dir, params.depth_scale);
+    let k = params.iterations;
+    let step = dir.xy * (params.depth_scale / f32(k));
+    var uv = uv0;
+    var sum = 0.0;
+    for (var i = 0u; i < k; i++) {
+        let value = pomkit_parallax_at(heights, samp, uv, lod);
+        sum += value;
+        uv += step * value;
+    }
+    return pomkit_hit_on_ray(uv0, s, uv - uv0, sum / f32(k) * -dir.z, k);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Steep parallax (McGuire 2005). Erratum (docs/REFERENCES.md, Errata): the loop is capped; the
+// plane at depth 1 is always at or below the surface and needs no fetch.
+// ---------------------------------------------------------------------------------------------
+
+fn pomkit_trace_steep(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
+    let s = pomkit_ray_extent(dir, params.depth_scale);
+    let n = params.samples;
+    for (var i = 0u; i < n; i++) {
+        let z = f32(i) / f32(n);
+        if pomkit_depth_at(heights, samp, uv0 + s * z, lod) <= z {
+            return PomkitHit(uv0 + s * z, z, i + 1u);
+        }
+    }
+    return PomkitHit(uv0 + s, 1.0, n);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Parallax occlusion mapping, 2004 (Brawley & Tatarchuk, ShaderX3): 8 samples along the
+// parallax vector with Brawley's perspective bias, line-line intersection. The article's
+// ps_2_0 shader cannot branch, so all 8 samples are fetched.
+//
+// Brawley computes the parallax vector per vertex. Here it comes from the per-pixel view
+// direction: tan(theta) is not linear across a triangle, and on large polygons the per-vertex
+// version visibly bends the relief. The CPU twin does the same.
+// ---------------------------------------------------------------------------------------------
+
+fn pomkit_trace_pom_classic(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
+    let cos = -dir.z;
+    let pb = params.perspective_bias;
+    let bias = max(pb + (1.0 - pb) * (2.0 * cos - 1.0), 0.0);
+    let s = dir.xy * (params.depth_scale / -dir.z) * bias;
+    var t_prev = 0.0;
+    var d_prev = 0.0;
+    var found = false;
+    var z = 1.0;
+    for (var i = 1u; i <= 8u; i++) {
+        let t = f32(i) / 8.0;
+        let d = pomkit_depth_at(heights, samp, uv0 + s * t, lod);
+        if i == 1u {
+            d_prev = d;
+        }
+        if !found && d <= t {
+            z = pomkit_line_intersection(t_prev, max(d_prev, t_prev), t, d);
+            found = true;
+        }
+        if !found {
+            t_prev = t;
+            d_prev = d;
+        }
+    }
+    return PomkitHit(uv0 + s * z, z, 8u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Parallax occlusion mapping (Zink 2008 / Tatarchuk 2006): adaptive sample count, early exit,
+// piecewise-linear intersection, then optional secant refinement (as Unity HDRP).
+// ---------------------------------------------------------------------------------------------
+
+fn pomkit_trace_pom(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
+    let s = pomkit_ray_extent(dir, params.depth_scale);
+    let n = pomkit_adaptive_samples(-dir.z, params.min_samples, params.max_samples);
+    let step = 1.0 / f32(n);
+    var fetches = 1u;
+    var a = vec2<f32>(0.0, pomkit_depth_at(heights, samp, uv0, lod));
+    if a.y <= 0.0 {
+        return PomkitHit(uv0, 0.0, fetches);
+    }
+    var b = vec2<f32>(1.0, 1.0);
+    var found = false;
+    for (var i = 1u; i <= n; i++) {
+        var t = f32(i) * step;
+        if i == n {
+            t = 1.0;
+        }
+        let d = pomkit_depth_at(heights, samp, uv0 + s * t, lod);
+        fetches += 1u;
+        if d <= t {
+            b = vec2<f32>(t, d);
+            found = true;
+            break;
+        }
+        a = vec2<f32>(t, d);
+    }
+    if !found {
+        return PomkitHit(uv0 + s, 1.0, fetches);
+    }
+    var z = pomkit_line_intersection(a.x, a.y, b.x, b.y);
+    for (var i = 0u; i < params.refine; i++) {
+        let d = pomkit_depth_at(heights, samp, uv0 + s * z, lod);
+        fetches += 1u;
+        if d > z {
+            a = vec2<f32>(z, d);
+        } else {
+            b = vec2<f32>(z, d);
+        }
+        z = pomkit_line_intersection(a.x, a.y, b.x, b.y);
+    }
+    return PomkitHit(uv0 + s * z, z, fetches);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Relief mapping (Policarpo, Oliveira & Comba 2005): linear search, then binary refinement.
+// ---------------------------------------------------------------------------------------------
+
+fn pomkit_trace_relief(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
+    let s = pomkit_ray_extent(dir, params.depth_scale);
+    let n = params.samples;
+    var fetches = 0u;
+    var lo = 0.0;
+    var hi = 1.0;
+    for (var i = 1u; i < n; i++) {
+        let t = f32(i) / f32(n);
+        fetches += 1u;
+        if pomkit_depth_at(heights, samp, uv0 + s * t, lod) <= t {
+            hi = t;
+            break;
+        }
+        lo = t;
+    }
+    for (var i = 0u; i < params.binary_steps; i++) {
+        let mid = 0.5 * (lo + hi);
+        fetches += 1u;
+        if pomkit_depth_at(heights, samp, uv0 + s * mid, lod) <= mid {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    var z = hi;
+    if params.binary_steps > 0u {
+        z = 0.5 * (lo + hi);
+    }
+    return PomkitHit(uv0 + s * z, z, fetches);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The exact tracer: the first intersection with the bilinear surface of the mip-0 texels
+// (exact.wesl), found by a maximum-height pyramid walk. Needs the pyramid texture.
+// ---------------------------------------------------------------------------------------------
+
+/// With wrapping edges, texel coordinates relative to the entry point's tile keep f32 precise
+/// for UVs far from 0 (the surface repeats, so the walk is the same). Clamped edges do not tile.
+fn pomkit_entry_tile(uv: vec2<f32>, edges: u32) -> vec2<f32> {
+    if edges == POMKIT_WRAP {
+        return floor(uv);
+    }
+    return vec2<f32>(0.0);
+}
+
+fn pomkit_trace_exact(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>) -> PomkitHit {
+    let map = pomkit_map(heights, pyramid, params);
+    let s = pomkit_ray_extent(dir, params.depth_scale);
+    let tile = pomkit_entry_tile(uv0, map.edges);
+    let o = vec3<f32>((uv0 - tile) * map.size, 0.0);
+    let d = vec3<f32>(s * map.size, 1.0);
+    let walk = pomkit_exact_first_hit(heights, pyramid, map, o, d, 0.0, 1.0);
+    var t = walk.t;
+    if t < 0.0 {
+        t = 1.0;
+    }
+    t = clamp(t, 0.0, 1.0);
+    let p = o + d * t;
+    return PomkitHit(tile + p.xy / map.size, t, walk.fetches);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Dispatch
+// ---------------------------------------------------------------------------------------------
+
+/// Traces the view ray `ray` (from `pomkit_view_ray`) entering at `uv` with the technique
+/// `technique` (`POMKIT_*`), reading heights at mip `lod` (`pomkit_mip_level`; `exact` always
+/// reads mip 0). `pyramid` is read by `exact` only; other techniques accept any texture there.
+/// A ray that does not enter (w = 0), and `flat` and `normal`, hit at `uv`, depth 0.
+///
+/// Where the edges wrap, `uv` is first reduced to its tile (exact in f32) and the tile added
+/// back to the hit, as pomkit_core does: UVs many tiles from the origin trace as well as small
+/// ones.
+fn pomkit_trace(technique: u32, heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv: vec2<f32>, ray: vec4<f32>, lod: f32) -> PomkitHit {
+    if !(ray.w > 0.0) {
+        return PomkitHit(uv, 0.0, 0u);
+    }
+    let tile = pomkit_entry_tile(uv, params.edges);
+    var hit = pomkit_trace_in_tile(technique, heights, pyramid, samp, params, uv - tile, ray.xyz, lod);
+    hit.uv += tile;
+    return hit;
+}
+
+fn pomkit_trace_in_tile(technique: u32, heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
+    switch technique {
+        case POMKIT_PARALLAX: {
+            return pomkit_trace_parallax(heights, samp, params, uv, dir, lod);
+        }
+        case POMKIT_ITERATIVE: {
+            return pomkit_trace_iterative(heights, samp, params, uv, dir, lod);
+        }
+        case POMKIT_STEEP: {
+            return pomkit_trace_steep(heights, samp, params, uv, dir, lod);
+        }
+        case POMKIT_POM_CLASSIC: {
+            return pomkit_trace_pom_classic(heights, samp, params, uv, dir, lod);
+        }
+        case POMKIT_POM: {
+            return pomkit_trace_pom(heights, samp, params, uv, dir, lod);
+        }
+        case POMKIT_RELIEF: {
+            return pomkit_trace_relief(heights, samp, params, uv, dir, lod);
+        }
+        case POMKIT_EXACT: {
+            return pomkit_trace_exact(heights, pyramid, params, uv, dir);
+        }
+        default: {
+            return PomkitHit(uv, 0.0, 0u);
+        }
+    }
+}
+
+/// The depth to shade and shadow from. Steep parallax stops on the first layer *below* the
+/// surface, up to one layer deep; a shadow ray started there shadows itself in contour rings.
+/// For `steep` this lifts the receiver onto the surface (one more fetch); other techniques'
+/// hits are returned unchanged.
+fn pomkit_receiver(technique: u32, heights: texture_2d<f32>, samp: sampler, hit: PomkitHit, lod: f32) -> PomkitHit {
+    if technique != POMKIT_STEEP {
+        return hit;
+    }
+    let d = pomkit_depth_at(heights, samp, hit.uv, lod);
+    return PomkitHit(hit.uv, min(hit.depth, d), hit.fetches + 1u);
+}
+
+// ===== module shadow =====
+
+// pomkit shader library: self-shadowing of the traced point (Brawley & Tatarchuk 2004; McGuire
+// 2005; Tatarchuk 2006 section 3.2; docs/REFERENCES.md), the twin of pomkit_core shadow.rs.
+//
+// Hard and soft shadows march from the traced point toward the light with pom's adaptive
+// sample count; exact shadows run the exact walk (exact.wesl) and need the pyramid.
+
+
+/// Visibility of the light from the traced point (`uv`, `depth`), for `params.shadow_mode`.
+/// `light` is the direction toward the light in ray terms (`pomkit_light_ray` of the
+/// tangent-space light vector; any length, z > 0 above the surface). Samples are read at mip
+/// `lod`, as the trace's. A zero or non-finite `light` gives 1; a light below the tangent plane
+/// gives 0 with no fetch (Tatarchuk 2006 skips the trace there; test the geometric N.L yourself
+/// to skip the call).
+fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv_in: vec2<f32>, depth_in: f32, light: vec3<f32>, lod: f32) -> PomkitShadow {
+    let l2 = dot(light, light);
+    if !(l2 > 0.0) || l2 > 1e30 {
+        return PomkitShadow(1.0, 0u);
+    }
+    let l = light * inverseSqrt(l2);
+    if l.z <= 0.0 {
+        return PomkitShadow(0.0, 0u);
+    }
+    let depth = clamp(depth_in, 0.0, 1.0);
+    let mode = params.shadow_mode;
+    if mode == POMKIT_SHADOW_NONE || depth <= 0.0 {
+        // Nothing lies above the polygon's surface: a point on it is never self-shadowed.
+        return PomkitShadow(1.0, 0u);
+    }
+    // The point in its own tile where the surface repeats (a visibility needs no tile back).
+    let uv = uv_in - pomkit_entry_tile(uv_in, params.edges);
+    // UV offset per unit of depth climbed toward the light.
+    let s = l.xy * (params.depth_scale / max(l.z, POMKIT_MIN_COS));
+    if mode == POMKIT_SHADOW_EXACT {
+        let map = pomkit_map(heights, pyramid, params);
+        // The receiver may lie below the exact surface (pom's linear segments cut under the
+        // bilinear surface; coarser mips differ from mip 0): an exact ray from there shadows
+        // itself in speckles. Lift it onto the exact surface (one fetch), then a hair above it
+        // (f32: 1e-4 of the depth range; the CPU uses 1e-5 in f64).
+        let on_surface = min(depth, pomkit_depth_at(heights, samp, uv, 0.0));
+        let eps = 1e-4;
+        let z0 = max(on_surface - eps, 0.0);
+        let o = vec3<f32>(uv * map.size, z0);
+        let d = vec3<f32>(s * map.size, -1.0);
+        let walk = pomkit_exact_first_hit(heights, pyramid, map, o, d, min(eps, z0), z0);
+        return PomkitShadow(select(1.0, 0.0, walk.t >= 0.0), walk.fetches + 1u);
+    }
+    // Hard and soft: samples at climbed depths t_i = depth * i / n, i = 1 .. n - 1 (the last
+    // point lies on the polygon's surface, which nothing rises above).
+    let n = pomkit_adaptive_samples(l.z, params.min_samples, params.max_samples);
+    let soft = mode == POMKIT_SHADOW_SOFT;
+    let rho = max(params.softness, 1e-4);
+    // The light's elevation above the tangent plane, and the horizontal distance (in depth
+    // units) covered per unit climbed.
+    let tan_theta = sqrt(max(1.0 - l.z * l.z, 0.0)) / l.z;
+    let light_elevation = atan2(1.0, tan_theta);
+    var visibility = 1.0;
+    var fetches = 0u;
+    for (var i = 1u; i < n; i++) {
+        let t = depth * f32(i) / f32(n);
+        let d = pomkit_depth_at(heights, samp, uv + s * t, lod);
+        fetches += 1u;
+        if soft {
+            // The blocker's elevation seen from the receiver against the light's: nearer
+            // blockers subtend more and darken more; the darkest sample is kept.
+            let elevation = atan2(depth - d, t * tan_theta);
+            let v = clamp(0.5 - (elevation - light_elevation) / (2.0 * rho), 0.0, 1.0);
+            visibility = min(visibility, v);
+        } else if d < depth - t - 1e-5 {
+            return PomkitShadow(0.0, fetches);
+        }
+    }
+    return PomkitShadow(visibility, fetches);
+}
+
+// ===== module depth =====
+
+// pomkit shader library: pixel depth offset. A traced pixel writes the depth of the point it
+// hit, below the polygon, instead of the polygon's own depth: parallax-mapped objects then meet
+// other geometry where displaced geometry would, and shadow maps see the relief.
+//
+// Writing `@builtin(frag_depth)` turns off early depth testing for the pipeline, so hosts keep
+// a separate pipeline (or entry point) for materials that use it.
+
+/// World position of the traced point: `depth` (in [0, 1], from `PomkitHit`) below the surface
+/// point `world`, along the view ray. `to_eye` is the unit vector from `world` toward the eye,
+/// `normal` the unit surface normal, `uv_scale` the world length of one UV unit along u and v
+/// (as for `pomkit_view_ray`).
+fn pomkit_hit_position(world: vec3<f32>, to_eye: vec3<f32>, normal: vec3<f32>, depth: f32, depth_scale: f32, uv_scale: vec2<f32>) -> vec3<f32> {
+    let l_world = sqrt(max(uv_scale.x * uv_scale.y, 0.0));
+    let down = depth * depth_scale * l_world;
+    let cos = max(dot(to_eye, normal), 1e-3);
+    return world - to_eye * (down / cos);
+}
+
+/// The depth-buffer value of the world point `p` under `view_proj`, never nearer than the
+/// polygon's own `fragment_depth` (`@builtin(position).z`): with `reverse_z` (near = 1, far = 0,
+/// compare `Greater`) nearer means larger. Returns `fragment_depth` where `p` is behind the eye.
+fn pomkit_pixel_depth(p: vec3<f32>, view_proj: mat4x4<f32>, fragment_depth: f32, reverse_z: bool) -> f32 {
+    let c = view_proj * vec4<f32>(p, 1.0);
+    if !(c.w > 0.0) {
+        return fragment_depth;
+    }
+    let z = c.z / c.w;
+    if reverse_z {
+        return clamp(min(z, fragment_depth), 0.0, 1.0);
+    }
+    return clamp(max(z, fragment_depth), 0.0, 1.0);
+}

@@ -1,0 +1,202 @@
+//! pomkit's tracing as a WGSL library that other shaders import.
+//!
+//! The library is six modules in WESL form under `crates/pomkit-gpu/shaders/pomkit/`
+//! ([`MODULES`]): `common` (constants, [`PomkitParams`] and the ray set-up), `lod` (mip level
+//! and LOD fade), `exact` (the exact tracer's walk), `trace` (every technique and the
+//! `pomkit_trace` dispatch), `shadow` (hard, soft and exact self-shadowing) and `depth` (pixel
+//! depth offset). Every function is pure: it reads heights only through the textures and
+//! sampler it is given, and no module has module-level variables.
+//!
+//! Two ways to use it:
+//! - **WESL** (Bevy 0.20, the `wesl` crate): put the six files in a folder of your shader
+//!   package and `import package::pomkit::trace::pomkit_trace;` (the modules import each other
+//!   with `super::`, so the folder may sit anywhere).
+//! - **Plain WGSL** ([`WGSL`], the file `crates/pomkit-gpu/shaders/pomkit.wgsl`): the modules
+//!   concatenated without their `import` lines. Paste it in front of your shader, or call
+//!   [`compose`]. Every name starts with `pomkit_` or `POMKIT_`, so it does not collide with
+//!   yours.
+//!
+//! docs/EMBEDDING.md shows a whole program; `examples/foreign_renderer.rs` is one.
+
+use pomkit_core::EdgeMode;
+use pomkit_core::scene::Material;
+use pomkit_core::shadow::{ShadowMode, ShadowParams};
+use pomkit_core::trace::{Technique, TraceParamError, TraceParams};
+
+use crate::util::Std140;
+
+/// The library's modules in WESL form, as (module name, source), each after the modules it
+/// imports.
+pub const MODULES: [(&str, &str); 6] = [
+    ("common", include_str!("../shaders/pomkit/common.wesl")),
+    ("lod", include_str!("../shaders/pomkit/lod.wesl")),
+    ("exact", include_str!("../shaders/pomkit/exact.wesl")),
+    ("trace", include_str!("../shaders/pomkit/trace.wesl")),
+    ("shadow", include_str!("../shaders/pomkit/shadow.wesl")),
+    ("depth", include_str!("../shaders/pomkit/depth.wesl")),
+];
+
+/// The whole library as plain WGSL (no entry points, no bindings): [`flatten`]ed from
+/// [`MODULES`] and kept in the repository as `crates/pomkit-gpu/shaders/pomkit.wgsl` for programs
+/// that are not written in Rust (a test keeps the file equal to [`flatten`]'s output).
+pub const WGSL: &str = include_str!("../shaders/pomkit.wgsl");
+
+/// The plain-WGSL form of the library: a header, then each module of [`MODULES`] with its
+/// `import` lines removed.
+#[must_use]
+pub fn flatten() -> String {
+    let mut out = String::from(
+        "// pomkit shader library, plain WGSL: generated from crates/pomkit-gpu/shaders/pomkit/*.wesl by\n\
+         // pomkit_gpu::library::flatten (do not edit; `UPDATE_SHADERS=1 cargo test -p pomkit-gpu --test\n\
+         // library` rewrites it). Paste it in front of your shader; docs/EMBEDDING.md shows how.\n",
+    );
+    for (name, source) in MODULES {
+        out.push_str(&format!("\n// ===== module {name} =====\n\n"));
+        for line in source.lines() {
+            if line.starts_with("import ") {
+                continue;
+            }
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// `host` (WGSL that calls the library) with the library in front of it.
+#[must_use]
+pub fn compose(host: &str) -> String {
+    format!("{WGSL}\n// ===== host shader =====\n\n{host}")
+}
+
+/// The value of the library's `POMKIT_*` technique constant for `t`.
+#[must_use]
+pub const fn technique_index(t: Technique) -> u32 {
+    match t {
+        Technique::Flat => 0,
+        Technique::Normal => 1,
+        Technique::Parallax => 2,
+        Technique::Iterative => 3,
+        Technique::Steep => 4,
+        Technique::PomClassic => 5,
+        Technique::Pom => 6,
+        Technique::Relief => 7,
+        Technique::Exact => 8,
+    }
+}
+
+/// The value of the library's `POMKIT_SHADOW_*` constant for `m`.
+#[must_use]
+pub const fn shadow_index(m: ShadowMode) -> u32 {
+    match m {
+        ShadowMode::None => 0,
+        ShadowMode::Hard => 1,
+        ShadowMode::Soft => 2,
+        ShadowMode::Exact => 3,
+    }
+}
+
+/// A parameter of [`PomkitParams`] that cannot be traced with.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ParamError {
+    /// A float parameter is NaN or infinite.
+    #[error("{name} is {value}: it must be a finite number")]
+    NotFinite {
+        /// The parameter (`depth_scale`, `softness`, ...).
+        name: &'static str,
+        /// Its value.
+        value: f32,
+    },
+    /// A tracing parameter is outside the range the tracers accept (the message names it and
+    /// the range).
+    #[error(transparent)]
+    Trace(#[from] TraceParamError),
+    /// `softness` is negative.
+    #[error("softness is {0}: it must be at least 0 (radians of the light's angular radius)")]
+    Softness(f32),
+}
+
+/// The library's `PomkitParams` uniform: a material's tracing parameters, 64 bytes.
+///
+/// Build one with [`PomkitParams::new`] (checked) or [`PomkitParams::from_material`], write it
+/// with [`PomkitParams::to_bytes`] into a uniform buffer the shader reads, and write it again
+/// when a parameter changes: nothing else needs rebuilding.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PomkitParams {
+    /// The technique `pomkit_trace` runs when the shader passes `params.technique`.
+    pub technique: Technique,
+    /// The self-shadow mode and soft-shadow penumbra.
+    pub shadow: ShadowParams,
+    /// The tracing parameters (samples, depth scale, edge mode, ...).
+    pub trace: TraceParams,
+    /// Mip level up to which the full technique runs (Tatarchuk 2006's LOD fade).
+    pub lod_threshold: f32,
+}
+
+impl PomkitParams {
+    /// Bytes of the WGSL struct.
+    pub const SIZE: u64 = 64;
+
+    /// Checked parameters: `trace` as [`TraceParams::validate`] accepts it, a finite softness
+    /// and LOD threshold.
+    ///
+    /// # Errors
+    /// [`ParamError`] naming the first parameter that is not finite or out of range.
+    pub fn new(
+        technique: Technique,
+        shadow: ShadowParams,
+        trace: TraceParams,
+        lod_threshold: f32,
+    ) -> Result<Self, ParamError> {
+        for (name, value) in [
+            ("depth_scale", trace.depth_scale),
+            ("perspective_bias", trace.perspective_bias),
+            ("softness", shadow.softness),
+            ("lod_threshold", lod_threshold),
+        ] {
+            if !value.is_finite() {
+                return Err(ParamError::NotFinite { name, value });
+            }
+        }
+        trace.validate()?;
+        if shadow.softness < 0.0 {
+            return Err(ParamError::Softness(shadow.softness));
+        }
+        Ok(Self { technique, shadow, trace, lod_threshold })
+    }
+
+    /// The parameters of a pomkit material drawn with `technique`, sanitized as the renderers
+    /// sanitize them (a scene loader has already checked them).
+    #[must_use]
+    pub fn from_material(material: &Material, technique: Technique) -> Self {
+        Self {
+            technique,
+            shadow: material.shadow,
+            trace: material.trace.sanitized(),
+            lod_threshold: material.lod_threshold,
+        }
+    }
+
+    /// The uniform's bytes (std140 and WGSL uniform layout agree for this struct).
+    #[must_use]
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let p = self.trace.sanitized();
+        let softness = if self.shadow.softness.is_finite() { self.shadow.softness } else { 0.1 };
+        let lod_threshold = if self.lod_threshold.is_finite() { self.lod_threshold } else { f32::MAX };
+        let mut u = Std140::new();
+        u.u(technique_index(self.technique)).u(shadow_index(self.shadow.mode)).u(edges_index(p.edges));
+        u.u(p.min_samples).u(p.max_samples).u(p.samples).u(p.iterations).u(p.binary_steps).u(p.refine);
+        u.f(p.depth_scale).f(p.perspective_bias).f(softness).f(lod_threshold);
+        u.u(0).u(0).u(0);
+        u.bytes()
+    }
+}
+
+/// The value of the library's `POMKIT_WRAP` / `POMKIT_CLAMP` for `e`.
+#[must_use]
+pub const fn edges_index(e: EdgeMode) -> u32 {
+    match e {
+        EdgeMode::Wrap => 0,
+        EdgeMode::Clamp => 1,
+    }
+}
