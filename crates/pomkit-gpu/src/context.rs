@@ -127,7 +127,8 @@ impl GpuContext {
     }
 
     /// Reads mip `level` of a 2D texture with 16-byte texels (`Rgba32Float`) or 8-byte texels
-    /// (`Rgba16Float`) or 4-byte texels (`R32Float`), returning its texels as `f32`s, rows packed.
+    /// (`Rgba16Float`) or 4-byte texels (`R32Float`, and the depth of `Depth32Float`), returning
+    /// its texels as `f32`s, rows packed. The texture needs `COPY_SRC` usage.
     ///
     /// # Errors
     /// [`GpuError::Device`] as [`GpuContext::read_buffer`]; [`GpuError::Unsupported`] for another
@@ -136,7 +137,7 @@ impl GpuContext {
         let (bpp, channels, half) = match texture.format() {
             wgpu::TextureFormat::Rgba32Float => (16u32, 4usize, false),
             wgpu::TextureFormat::Rgba16Float => (8, 4, true),
-            wgpu::TextureFormat::R32Float => (4, 1, false),
+            wgpu::TextureFormat::R32Float | wgpu::TextureFormat::Depth32Float => (4, 1, false),
             f => return Err(GpuError::Unsupported(format!("reading back {f:?} textures"))),
         };
         let w = (texture.width() >> level).max(1);
@@ -154,7 +155,11 @@ impl GpuContext {
                 texture,
                 mip_level: level,
                 origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
+                aspect: if texture.format().has_depth_aspect() {
+                    wgpu::TextureAspect::DepthOnly
+                } else {
+                    wgpu::TextureAspect::All
+                },
             },
             wgpu::TexelCopyBufferInfo {
                 buffer: &buffer,

@@ -10,11 +10,13 @@ pub mod context;
 pub mod height;
 pub mod library;
 pub mod material;
+pub mod pipeline;
 pub mod renderer;
 pub mod util;
 
 pub use context::GpuContext;
-pub use material::{FrameUniforms, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
+pub use material::{FrameUniforms, FrameView, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
+pub use pipeline::{AttributeKind, PipelineError, PipelineOptions, VertexAttribute, VertexBuffer, VertexLayout};
 pub use renderer::{GpuRenderError, GpuRenderer, GpuScene, Timings};
 
 /// Why the GPU renderer could not run.

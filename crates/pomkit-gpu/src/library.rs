@@ -111,6 +111,12 @@ pub enum ParamError {
     /// the range).
     #[error(transparent)]
     Trace(#[from] TraceParamError),
+    /// [`crate::GpuMaterial::set_params`] was asked to change the edge mode, which is part of
+    /// the material's sampler.
+    #[error(
+        "the edge mode cannot change on an existing material (it sets the sampler's address mode): create a new material"
+    )]
+    EdgesChanged,
     /// `softness` is negative.
     #[error("softness is {0}: it must be at least 0 (radians of the light's angular radius)")]
     Softness(f32),
@@ -180,15 +186,42 @@ impl PomkitParams {
     /// The uniform's bytes (std140 and WGSL uniform layout agree for this struct).
     #[must_use]
     pub fn to_bytes(&self) -> Vec<u8> {
+        self.block().bytes()
+    }
+
+    /// Each member's name and byte offset as [`PomkitParams::to_bytes`] writes them (a test
+    /// checks them against the WGSL struct).
+    #[must_use]
+    pub fn layout() -> Vec<(&'static str, usize)> {
+        Self::from_material(&Material::default(), Technique::Pom).block().layout()
+    }
+
+    /// Bytes [`PomkitParams::to_bytes`] writes (= [`PomkitParams::SIZE`]).
+    #[must_use]
+    pub fn default_bytes_len() -> usize {
+        Self::from_material(&Material::default(), Technique::Pom).to_bytes().len()
+    }
+
+    fn block(&self) -> Std140 {
         let p = self.trace.sanitized();
         let softness = if self.shadow.softness.is_finite() { self.shadow.softness } else { 0.1 };
         let lod_threshold = if self.lod_threshold.is_finite() { self.lod_threshold } else { f32::MAX };
         let mut u = Std140::new();
-        u.u(technique_index(self.technique)).u(shadow_index(self.shadow.mode)).u(edges_index(p.edges));
-        u.u(p.min_samples).u(p.max_samples).u(p.samples).u(p.iterations).u(p.binary_steps).u(p.refine);
-        u.f(p.depth_scale).f(p.perspective_bias).f(softness).f(lod_threshold);
-        u.u(0).u(0).u(0);
-        u.bytes()
+        u.named("technique", 4).u(technique_index(self.technique));
+        u.named("shadow_mode", 4).u(shadow_index(self.shadow.mode));
+        u.named("edges", 4).u(edges_index(p.edges));
+        u.named("min_samples", 4).u(p.min_samples);
+        u.named("max_samples", 4).u(p.max_samples);
+        u.named("samples", 4).u(p.samples);
+        u.named("iterations", 4).u(p.iterations);
+        u.named("binary_steps", 4).u(p.binary_steps);
+        u.named("refine", 4).u(p.refine);
+        u.named("depth_scale", 4).f(p.depth_scale);
+        u.named("perspective_bias", 4).f(p.perspective_bias);
+        u.named("softness", 4).f(softness);
+        u.named("lod_threshold", 4).f(lod_threshold);
+        u.named("pad0", 4).u(0).named("pad1", 4).u(0).named("pad2", 4).u(0);
+        u
     }
 }
 

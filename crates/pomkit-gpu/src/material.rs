@@ -23,8 +23,9 @@ use crate::{GpuContext, GpuError};
 /// Lights the shader reads per frame.
 pub const MAX_LIGHTS: usize = 4;
 
-use crate::library::PomkitParams;
 pub use crate::library::technique_index;
+use crate::library::{ParamError, PomkitParams};
+use crate::pipeline::{PipelineError, PipelineOptions};
 
 /// The render targets a pipeline draws into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -59,7 +60,7 @@ pub struct MaterialPipelines {
     pub material_layout: wgpu::BindGroupLayout,
     /// Bind group layout of group 2 (object).
     pub object_layout: wgpu::BindGroupLayout,
-    pipelines: HashMap<(u32, bool, Targets), wgpu::RenderPipeline>,
+    pipelines: HashMap<(u32, bool, PipelineOptions), wgpu::RenderPipeline>,
     passes: HeightPasses,
     dummy: Arc<DummyTextures>,
 }
@@ -207,11 +208,12 @@ impl MaterialPipelines {
     /// The pipeline for `technique` if [`MaterialPipelines::pipeline`] created it already.
     #[must_use]
     pub fn cached(&self, technique: Technique, depth_offset: bool, targets: Targets) -> Option<&wgpu::RenderPipeline> {
-        self.pipelines.get(&(technique_index(technique), depth_offset, targets))
+        self.pipelines.get(&(technique_index(technique), depth_offset, PipelineOptions::from(targets)))
     }
 
-    /// The pipeline drawing `technique` into `targets` (created on first use). Materials with
-    /// pixel depth offset use the `frag_depth` variant.
+    /// The pipeline drawing `technique` into `targets` with pomkit's own vertex layout
+    /// ([`GpuMesh`]), depth test `Less` and back-face culling (created on first use). Materials
+    /// with pixel depth offset use the `frag_depth` variant.
     pub fn pipeline(
         &mut self,
         device: &wgpu::Device,
@@ -219,65 +221,120 @@ impl MaterialPipelines {
         depth_offset: bool,
         targets: Targets,
     ) -> &wgpu::RenderPipeline {
-        let key = (technique_index(technique), depth_offset, targets);
+        let key = (technique_index(technique), depth_offset, PipelineOptions::from(targets));
         let (shader, layout) = (&self.shader, &self.layout);
-        self.pipelines.entry(key).or_insert_with(|| {
-            let constants = [("TECHNIQUE", f64::from(key.0))];
-            let target = |format| wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL };
-            // Without AOVs the pipeline has one target, so it fits a pass with one attachment
-            // (the shader's AOV outputs are then discarded).
-            let mut color_targets = vec![Some(target(targets.color))];
-            if targets.aovs {
-                color_targets.extend([Some(target(AOV_FORMATS[0])), Some(target(AOV_FORMATS[1]))]);
+        self.pipelines.entry(key).or_insert_with_key(|key| create_pipeline(device, shader, layout, technique, key))
+    }
+
+    /// The pipeline drawing `technique` with a host renderer's pipeline state: its depth test
+    /// (reverse-Z included), MSAA, culling, formats and vertex layout (created on first use).
+    ///
+    /// # Errors
+    /// [`PipelineError`] when the options do not fit the shader or the device (checked before
+    /// wgpu sees them; anything wgpu still refuses is caught in an error scope and returned as
+    /// [`PipelineError::Wgpu`], never a panic).
+    pub fn pipeline_with(
+        &mut self,
+        device: &wgpu::Device,
+        technique: Technique,
+        depth_offset: bool,
+        options: &PipelineOptions,
+    ) -> Result<&wgpu::RenderPipeline, PipelineError> {
+        let key = (technique_index(technique), depth_offset, options.clone());
+        if !self.pipelines.contains_key(&key) {
+            options.validate(device)?;
+            let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+            let pipeline = create_pipeline(device, &self.shader, &self.layout, technique, &key);
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(PipelineError::Wgpu(e.to_string()));
             }
-            let attributes = wgpu::vertex_attr_array![
-                0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x2, 4 => Float32x2, 5 => Float32
-            ];
-            let label = format!("pomkit {}{}", technique.name(), if depth_offset { " +pdo" } else { "" });
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(&label),
-                layout: Some(layout),
-                vertex: wgpu::VertexState {
-                    module: shader,
-                    entry_point: Some("vs_main"),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
-                        ..Default::default()
-                    },
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: (VERTEX_FLOATS * 4) as u64,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &attributes,
-                    })],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    front_face: wgpu::FrontFace::Ccw,
-                    cull_mode: Some(wgpu::Face::Back),
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: targets.depth,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: shader,
-                    entry_point: Some(if depth_offset { "fs_main_depth" } else { "fs_main" }),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
-                        ..Default::default()
-                    },
-                    targets: &color_targets,
-                }),
-                multiview_mask: None,
-                cache: None,
+            self.pipelines.insert(key.clone(), pipeline);
+        }
+        self.pipelines.get(&key).ok_or_else(|| PipelineError::Wgpu("pipeline cache lost an entry".into()))
+    }
+}
+
+impl From<Targets> for PipelineOptions {
+    fn from(t: Targets) -> Self {
+        Self { color: t.color, aovs: t.aovs, depth: t.depth, ..Self::default() }
+    }
+}
+
+fn create_pipeline(
+    device: &wgpu::Device,
+    shader: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    technique: Technique,
+    key: &(u32, bool, PipelineOptions),
+) -> wgpu::RenderPipeline {
+    let (index, depth_offset, o) = key;
+    let constants = [("TECHNIQUE", f64::from(*index)), ("REVERSE_Z", if o.reverse_z() { 1.0 } else { 0.0 })];
+    let target = |format| wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL };
+    // Without AOVs the pipeline has one target, so it fits a pass with one attachment (the
+    // shader's AOV outputs are then discarded).
+    let mut color_targets = vec![Some(target(o.color))];
+    if o.aovs {
+        color_targets.extend([Some(target(AOV_FORMATS[0])), Some(target(AOV_FORMATS[1]))]);
+    }
+    let attributes = o.vertex.wgpu_attributes();
+    let buffers: Vec<Option<wgpu::VertexBufferLayout<'_>>> = o
+        .vertex
+        .buffers
+        .iter()
+        .zip(&attributes)
+        .map(|(b, attributes)| {
+            Some(wgpu::VertexBufferLayout {
+                array_stride: b.array_stride,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes,
             })
         })
-    }
+        .collect();
+    let label = format!("pomkit {}{}", technique.name(), if *depth_offset { " +pdo" } else { "" });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(&label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module: shader,
+            entry_point: Some(o.vertex.entry_point()),
+            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
+            buffers: &buffers,
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: o.front_face,
+            cull_mode: o.cull_mode,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: o.depth,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(o.depth_compare),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: wgpu::MultisampleState { count: o.sample_count, ..Default::default() },
+        fragment: Some(wgpu::FragmentState {
+            module: shader,
+            entry_point: Some(if *depth_offset { "fs_main_depth" } else { "fs_main" }),
+            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
+            targets: &color_targets,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// A camera as the material's shader sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameView {
+    /// World to clip space of the target.
+    pub view_proj: Mat4,
+    /// World to clip space for pixel depth offset: only its z and w rows are used, so any
+    /// aspect ratio will do (pomkit passes its aspect-free projection; hosts pass `view_proj`).
+    pub depth_proj: Mat4,
+    /// The eye's world position.
+    pub eye: Vec3,
 }
 
 /// Camera and lights for one frame (bind group 0).
@@ -324,34 +381,44 @@ impl FrameUniforms {
         ambient: Vec3,
         lod_tint: bool,
     ) -> Result<(), GpuError> {
+        let view = camera.view();
+        self.write_view(
+            ctx,
+            &FrameView {
+                view_proj: camera.projection(aspect) * view,
+                depth_proj: camera.projection(1.0) * view,
+                eye: camera.eye,
+            },
+            lights,
+            ambient,
+            lod_tint,
+        )
+    }
+
+    /// Writes a host renderer's camera (its own matrices: reverse-Z, infinite far plane or
+    /// jitter included), lights, ambient light and the LOD tint switch.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] for more than [`MAX_LIGHTS`] lights or a matrix or eye that is
+    /// not finite.
+    pub fn write_view(
+        &self,
+        ctx: &GpuContext,
+        view: &FrameView,
+        lights: &[Light],
+        ambient: Vec3,
+        lod_tint: bool,
+    ) -> Result<(), GpuError> {
+        if !(view.view_proj.is_finite() && view.depth_proj.is_finite() && view.eye.is_finite()) {
+            return Err(GpuError::Unsupported("a camera matrix or eye position that is not finite".into()));
+        }
         if lights.len() > MAX_LIGHTS {
             return Err(GpuError::Unsupported(format!(
                 "{} lights: the GPU renderer shades at most {MAX_LIGHTS} per frame",
                 lights.len()
             )));
         }
-        let mut u = Std140::new();
-        u.mat4(camera.projection(aspect) * camera.view());
-        u.mat4(camera.projection(1.0) * camera.view());
-        u.vec4(camera.eye.extend(1.0).to_array());
-        u.vec4(ambient.extend(0.0).to_array());
-        for i in 0..MAX_LIGHTS {
-            match lights.get(i) {
-                Some(Light::Directional { direction, color, intensity }) => {
-                    u.vec4(direction.try_normalize().unwrap_or(Vec3::Y).extend(0.0).to_array());
-                    u.vec4((*color * *intensity).extend(0.0).to_array());
-                }
-                Some(Light::Point { position, color, intensity }) => {
-                    u.vec4(position.extend(1.0).to_array());
-                    u.vec4((*color * *intensity).extend(0.0).to_array());
-                }
-                None => {
-                    u.vec4([0.0; 4]);
-                    u.vec4([0.0; 4]);
-                }
-            }
-        }
-        u.u(lights.len() as u32).u(u32::from(lod_tint));
+        let u = frame_block(view, lights, ambient, lod_tint);
         ctx.queue.write_buffer(&self.buffer, 0, &u.bytes());
         Ok(())
     }
@@ -366,6 +433,9 @@ pub struct GpuMaterial {
     /// The height field's GPU textures (mips, normals, parallax map, pyramid), if it has one.
     pub height: Option<HeightMaps>,
     height_options: HeightPassOptions,
+    /// The material's uniform block: [`PomkitParams`] in its first 64 bytes.
+    uniforms: wgpu::Buffer,
+    params: PomkitParams,
     /// The bind group to set at index 1.
     pub bind_group: wgpu::BindGroup,
 }
@@ -432,16 +502,13 @@ impl GpuMaterial {
         });
         let field = material.height.as_deref();
         let has_normals = explicit_normals.is_some() || field.is_some_and(|f| f.width() >= 2 && f.height() >= 2);
-        let mut u = Std140::new();
-        u.raw(&PomkitParams::from_material(material, technique).to_bytes());
-        u.vec4(material.base_color.extend(1.0).to_array());
-        u.f(material.specular).f(material.shininess).u(u32::from(field.is_some())).u(u32::from(has_normals));
-        u.f(albedo[0].width() as f32).f(albedo[0].height() as f32).f((albedo.len() - 1) as f32);
-        u.u(u32::from(material.pixel_depth_offset));
+        let params = PomkitParams::from_material(material, technique);
+        let albedo_size = (albedo[0].width(), albedo[0].height(), albedo.len() as u32);
+        let u = material_block(&params, material, field.is_some(), has_normals, albedo_size);
         let uniforms = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("pomkit material"),
             contents: &u.bytes(),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
         let albedo_view = albedo_tex.create_view(&Default::default());
         let d = &pipelines.dummy;
@@ -465,7 +532,42 @@ impl GpuMaterial {
                 wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::Sampler(&sampler) },
             ],
         });
-        Ok(Self { technique, pixel_depth_offset: material.pixel_depth_offset, height, height_options, bind_group })
+        Ok(Self {
+            technique,
+            pixel_depth_offset: material.pixel_depth_offset,
+            height,
+            height_options,
+            uniforms,
+            params,
+            bind_group,
+        })
+    }
+
+    /// The tracing parameters the material draws with.
+    #[must_use]
+    pub fn params(&self) -> &PomkitParams {
+        &self.params
+    }
+
+    /// Changes the tracing parameters (technique, shadow mode, samples, depth scale, LOD
+    /// threshold, ...) by writing the uniform buffer: no texture, bind group or pipeline is
+    /// rebuilt. Draw with the pipeline of the new [`GpuMaterial::technique`]. A new depth scale
+    /// also changes the normals baked from the height map: call
+    /// [`GpuMaterial::encode_rebuild`] to bring them along.
+    ///
+    /// # Errors
+    /// [`ParamError::EdgesChanged`] when the edge mode differs: the sampler's address mode
+    /// is part of the bind group, so make a new material for that.
+    pub fn set_params(&mut self, ctx: &GpuContext, params: &PomkitParams) -> Result<(), ParamError> {
+        if params.trace.edges != self.params.trace.edges {
+            return Err(ParamError::EdgesChanged);
+        }
+        ctx.queue.write_buffer(&self.uniforms, 0, &params.to_bytes());
+        self.params = *params;
+        self.technique = params.technique;
+        let depth_scale = params.trace.sanitized().depth_scale;
+        self.height_options.depth_scale = depth_scale;
+        Ok(())
     }
 
     /// Records the compute passes that rebuild the height maps from mip 0 of the height
@@ -503,6 +605,71 @@ impl GpuMaterial {
         }
         maps.upload_depths(ctx, field.depths())
     }
+}
+
+/// `render.wgsl`'s `Material` uniform: the library's parameters, then pomkit's shading.
+fn material_block(
+    params: &PomkitParams,
+    material: &Material,
+    has_height: bool,
+    has_normals: bool,
+    (albedo_w, albedo_h, albedo_levels): (u32, u32, u32),
+) -> Std140 {
+    let mut u = Std140::new();
+    u.named("params", 16).raw(&params.to_bytes());
+    u.named("base_color", 16).vec4(material.base_color.extend(1.0).to_array());
+    u.named("specular", 4).f(material.specular);
+    u.named("shininess", 4).f(material.shininess);
+    u.named("has_height", 4).u(u32::from(has_height));
+    u.named("has_normals", 4).u(u32::from(has_normals));
+    u.named("albedo_size", 8).f(albedo_w as f32).f(albedo_h as f32);
+    u.named("albedo_max_level", 4).f(albedo_levels.saturating_sub(1) as f32);
+    u.named("pixel_depth_offset", 4).u(u32::from(material.pixel_depth_offset));
+    u
+}
+
+/// Each member's name and byte offset in `render.wgsl`'s `Material` uniform as pomkit writes
+/// it (a test checks them against the WGSL struct).
+#[must_use]
+pub fn material_layout() -> Vec<(&'static str, usize)> {
+    let params = PomkitParams::from_material(&Material::default(), Technique::Pom);
+    material_block(&params, &Material::default(), true, true, (1, 1, 1)).layout()
+}
+
+/// Each member's name and byte offset in `render.wgsl`'s `Frame` uniform as
+/// [`FrameUniforms::write_view`] writes it.
+#[must_use]
+pub fn frame_layout() -> Vec<(&'static str, usize)> {
+    let view = FrameView { view_proj: Mat4::IDENTITY, depth_proj: Mat4::IDENTITY, eye: Vec3::ZERO };
+    frame_block(&view, &[], Vec3::ZERO, false).layout()
+}
+
+fn frame_block(view: &FrameView, lights: &[Light], ambient: Vec3, lod_tint: bool) -> Std140 {
+    let mut u = Std140::new();
+    u.named("view_proj", 16).mat4(view.view_proj);
+    u.named("depth_proj", 16).mat4(view.depth_proj);
+    u.named("eye", 16).vec4(view.eye.extend(1.0).to_array());
+    u.named("ambient", 16).vec4(ambient.extend(0.0).to_array());
+    u.named("lights", 16);
+    for i in 0..MAX_LIGHTS {
+        match lights.get(i) {
+            Some(Light::Directional { direction, color, intensity }) => {
+                u.vec4(direction.try_normalize().unwrap_or(Vec3::Y).extend(0.0).to_array());
+                u.vec4((*color * *intensity).extend(0.0).to_array());
+            }
+            Some(Light::Point { position, color, intensity }) => {
+                u.vec4(position.extend(1.0).to_array());
+                u.vec4((*color * *intensity).extend(0.0).to_array());
+            }
+            None => {
+                u.vec4([0.0; 4]);
+                u.vec4([0.0; 4]);
+            }
+        }
+    }
+    u.named("light_count", 4).u(lights.len() as u32);
+    u.named("lod_tint", 4).u(u32::from(lod_tint));
+    u
 }
 
 fn upload_normal_map(ctx: &GpuContext, n: &NormalMap) -> Result<wgpu::Texture, GpuError> {

@@ -97,6 +97,15 @@ struct VertexBasic {
     @location(3) uv: vec2<f32>,
 }
 
+// A host's vertices with a UV scale but no displacement depth.
+struct VertexScaled {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) tangent: vec4<f32>,
+    @location(3) uv: vec2<f32>,
+    @location(4) uv_scale: vec2<f32>,
+}
+
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) world: vec3<f32>,
@@ -166,6 +175,11 @@ fn vs_main(v: VertexIn) -> VertexOut {
 @vertex
 fn vs_basic(v: VertexBasic) -> VertexOut {
     return vertex(VertexIn(v.position, v.normal, v.tangent, v.uv, vec2<f32>(0.0), 0.0));
+}
+
+@vertex
+fn vs_scaled(v: VertexScaled) -> VertexOut {
+    return vertex(VertexIn(v.position, v.normal, v.tangent, v.uv, v.uv_scale, 0.0));
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ pub fn rgba16f_bytes(values: &[f32]) -> Vec<u8> {
 #[derive(Clone, Debug, Default)]
 pub struct Std140 {
     words: Vec<u32>,
+    names: Vec<(&'static str, usize)>,
 }
 
 impl Std140 {
@@ -62,6 +63,21 @@ impl Std140 {
     pub fn mat4(&mut self, m: glam::Mat4) -> &mut Self {
         self.pad_to(16);
         self.fs(&m.to_cols_array())
+    }
+
+    /// Pads to `align` bytes and records that the member `name` starts here (see
+    /// [`Std140::layout`]).
+    pub fn named(&mut self, name: &'static str, align: usize) -> &mut Self {
+        self.pad_to(align);
+        self.names.push((name, self.words.len() * 4));
+        self
+    }
+
+    /// The byte offset of each member recorded with [`Std140::named`], in order: tests compare
+    /// it with the WGSL struct's layout as naga computes it.
+    #[must_use]
+    pub fn layout(&self) -> Vec<(&'static str, usize)> {
+        self.names.clone()
     }
 
     /// Appends a nested struct's bytes (a whole number of 16-byte rows, 16-byte aligned).
