@@ -93,12 +93,21 @@ impl HeightMaps {
     /// [`GpuError::Unsupported`] if a side is 0; [`GpuError::TooLarge`] if a side, or the
     /// pyramid's power-of-two padded side, exceeds the device's `max_texture_dimension_2d`.
     pub fn new(ctx: &GpuContext, width: u32, height: u32, label: &str) -> Result<Self, GpuError> {
+        Self::with_device(&ctx.device, width, height, label)
+    }
+
+    /// [`HeightMaps::new`] for a program that has a bare `wgpu::Device` rather than a
+    /// [`GpuContext`] (`crate::host::HeightResource` uses it).
+    ///
+    /// # Errors
+    /// As [`HeightMaps::new`].
+    pub fn with_device(device: &wgpu::Device, width: u32, height: u32, label: &str) -> Result<Self, GpuError> {
         if width == 0 || height == 0 {
             return Err(GpuError::Unsupported(format!(
                 "height map \"{label}\" of {width}x{height} texels: both sides must be at least 1"
             )));
         }
-        let limit = ctx.device.limits().max_texture_dimension_2d;
+        let limit = device.limits().max_texture_dimension_2d;
         if width > limit || height > limit {
             return Err(GpuError::TooLarge { what: format!("height map \"{label}\""), width, height, limit });
         }
@@ -118,7 +127,7 @@ impl HeightMaps {
             | wgpu::TextureUsages::COPY_DST
             | wgpu::TextureUsages::COPY_SRC;
         let texture = |what: &str, w: u32, h: u32, mip_level_count: u32, format: wgpu::TextureFormat| {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
+            device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(&format!("{label} {what}")),
                 size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
                 mip_level_count,

@@ -8,6 +8,7 @@
 
 pub mod context;
 pub mod height;
+pub mod host;
 pub mod library;
 pub mod material;
 pub mod pipeline;
@@ -15,6 +16,7 @@ pub mod renderer;
 pub mod util;
 
 pub use context::GpuContext;
+pub use host::{HeightBindings, HeightEncoding, HeightResource, HeightResourceOptions, HostError};
 pub use material::{FrameUniforms, FrameView, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
 pub use pipeline::{AttributeKind, PipelineError, PipelineOptions, VertexAttribute, VertexBuffer, VertexLayout};
 pub use renderer::{GpuRenderError, GpuRenderer, GpuScene, Timings};
