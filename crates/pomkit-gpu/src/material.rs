@@ -17,6 +17,7 @@ use pomkit_core::{EdgeMode, HeightField};
 use wgpu::util::DeviceExt;
 
 use crate::height::{HeightMaps, HeightPassOptions, HeightPasses};
+use crate::host::HeightResource;
 use crate::util::{Std140, rgba16f_bytes};
 use crate::{GpuContext, GpuError};
 
@@ -537,6 +538,116 @@ impl GpuMaterial {
             pixel_depth_offset: material.pixel_depth_offset,
             height,
             height_options,
+            uniforms,
+            params,
+            bind_group,
+        })
+    }
+
+    /// pomkit's material drawing with textures the program already has: the height maps of
+    /// `height` (built from a host texture or a field; rebuild them with
+    /// [`HeightResource::encode_rebuild`] when the heights change, not with
+    /// [`GpuMaterial::encode_rebuild`], which does nothing here) and, optionally, a colour
+    /// texture `albedo` sampled at the traced UV (any filterable float format with
+    /// `TEXTURE_BINDING`, all its mips used; sRGB formats are decoded by the sampler).
+    /// `material` gives the rest: base colour, specular, tracing parameters, shadows, pixel depth
+    /// offset and its normal map if it has one (else `height`'s normals). Its own height field
+    /// and albedo are ignored.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] when `material`'s edge mode differs from `height`'s (the
+    /// sampler would not match the pyramid), or `albedo` is a texture the shader cannot sample
+    /// (not 2D, multisampled, no `TEXTURE_BINDING`, not filterable float); [`GpuError::TooLarge`]
+    /// for a normal map beyond the device's limit.
+    pub fn with_height_resource(
+        ctx: &GpuContext,
+        pipelines: &MaterialPipelines,
+        material: &Material,
+        technique: Technique,
+        height: &HeightResource,
+        albedo: Option<&wgpu::Texture>,
+    ) -> Result<Self, GpuError> {
+        let p = material.trace.sanitized();
+        if p.edges != height.edges() {
+            return Err(GpuError::Unsupported(format!(
+                "material \"{}\" traces with {:?} edges but height map \"{}\" was built with {:?} edges: build \
+                 them with the same edge mode",
+                material.name,
+                p.edges,
+                height.label(),
+                height.edges()
+            )));
+        }
+        if let Some(t) = albedo {
+            let filterable = matches!(
+                t.format().sample_type(None, Some(ctx.device.features())),
+                Some(wgpu::TextureSampleType::Float { filterable: true })
+            );
+            if t.dimension() != wgpu::TextureDimension::D2
+                || t.depth_or_array_layers() != 1
+                || t.sample_count() != 1
+                || !t.usage().contains(wgpu::TextureUsages::TEXTURE_BINDING)
+                || !filterable
+            {
+                return Err(GpuError::Unsupported(format!(
+                    "albedo texture of material \"{}\" ({:?}, {:?}, {} layers, {} samples, usage {:?}): it must \
+                     be a single-sampled 2D texture of a filterable float format with TEXTURE_BINDING usage",
+                    material.name,
+                    t.format(),
+                    t.dimension(),
+                    t.depth_or_array_layers(),
+                    t.sample_count(),
+                    t.usage()
+                )));
+            }
+        }
+        let explicit_normals = material.normal_map.as_ref().map(|n| upload_normal_map(ctx, n)).transpose()?;
+        let explicit_view = explicit_normals.as_ref().map(|t| t.create_view(&Default::default()));
+        let white;
+        let (albedo_view, albedo_size) = match albedo {
+            Some(t) => (t.create_view(&Default::default()), (t.width(), t.height(), t.mip_level_count())),
+            None => {
+                white = texture_with_mips(
+                    ctx,
+                    "pomkit albedo",
+                    wgpu::TextureFormat::Rgba16Float,
+                    &rgba_levels(&[Texture::constant(Vec3::ONE)]),
+                );
+                (white.create_view(&Default::default()), (1, 1, 1))
+            }
+        };
+        let params = PomkitParams::from_material(material, technique);
+        let has_normals = explicit_view.is_some() || (height.width() >= 2 && height.height() >= 2);
+        let u = material_block(&params, material, true, has_normals, albedo_size);
+        let uniforms = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("pomkit material"),
+            contents: &u.bytes(),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        });
+        let normals_view = explicit_view.as_ref().unwrap_or(height.normals_view());
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&material.name),
+            layout: &pipelines.material_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: uniforms.as_entire_binding() },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(height.heights_view()),
+                },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(normals_view) },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(height.pyramid_view()),
+                },
+                wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&albedo_view) },
+                wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::Sampler(height.sampler()) },
+            ],
+        });
+        Ok(Self {
+            technique,
+            pixel_depth_offset: material.pixel_depth_offset,
+            height: None,
+            height_options: height.options().pass_options(),
             uniforms,
             params,
             bind_group,

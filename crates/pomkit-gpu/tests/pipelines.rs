@@ -5,7 +5,7 @@
 //!
 //! Without a GPU adapter the tests print "skipping: ..." and pass, unless POMKIT_REQUIRE_GPU=1.
 
-use std::sync::{Mutex, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use pomkit_core::demo::procedural_material;
 use pomkit_core::glam::{Mat4, Vec2, Vec3, Vec4};
@@ -408,4 +408,65 @@ fn bad_pipeline_options_are_errors() {
         let options = PipelineOptions { vertex, ..Default::default() };
         pipelines.pipeline_with(&ctx.device, Technique::Exact, true, &options).expect("valid layout");
     }
+}
+
+/// pomkit's material on a `HeightResource` (here built from a host's R8Unorm texture) draws
+/// what the material built from the same height field draws; a resource whose edge mode
+/// differs from the material's is refused.
+#[test]
+fn material_on_a_host_height_texture_equals_the_material_on_the_field() {
+    use pomkit_gpu::height::HeightPasses;
+    use pomkit_gpu::host::{HeightResource, HeightResourceOptions};
+    let Some(g) = gpu() else { return };
+    let mut g = g.lock().expect("gpu lock");
+    let m = mesh();
+    let pm = GpuMesh::new(&g.ctx, &m, None);
+    let opts = PipelineOptions { color: COLOR, ..PipelineOptions::default() };
+    let mut mat = material(Technique::Exact, 0.06, true);
+    mat.albedo = None;
+    mat.shadow.mode = ShadowMode::Exact;
+    // Heights with 8 bits, as the host's texture holds them, so both paths see the same field.
+    let field = mat.height.as_ref().expect("procedural height").as_ref().clone();
+    let bytes: Vec<u8> = field.heights().iter().map(|h| (h.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+    let quantized = pomkit_core::HeightField::from_heights(
+        field.width(),
+        field.height(),
+        bytes.iter().map(|&b| f32::from(b) / 255.0).collect(),
+    )
+    .expect("field");
+    mat.height = Some(Arc::new(quantized));
+    let texture = g.ctx.device.create_texture_with_data(
+        &g.ctx.queue,
+        &wgpu::TextureDescriptor {
+            label: Some("host heights"),
+            size: wgpu::Extent3d { width: field.width(), height: field.height(), depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::R8Unorm,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        },
+        wgpu::util::TextureDataOrder::LayerMajor,
+        &bytes,
+    );
+    let passes = HeightPasses::new(&g.ctx.device);
+    let ho = HeightResourceOptions { depth_scale: 0.06, ..Default::default() };
+    let resource = HeightResource::from_texture(&g.ctx.device, &g.ctx.queue, &passes, &texture, &ho, "host heights")
+        .expect("readable texture");
+    let on_resource =
+        GpuMaterial::with_height_resource(&g.ctx, &g.pipelines, &mat, Technique::Exact, &resource, None).expect("fits");
+    let on_field = new_material(&g, &mat);
+    let x = draw(&mut g, &on_resource, &Vertices::Pomkit(&pm), &opts);
+    let y = draw(&mut g, &on_field, &Vertices::Pomkit(&pm), &opts);
+    let p = psnr(&x.color, &y.color);
+    println!("material on a host R8 texture vs on the field: {p:.1} dB");
+    assert!(p >= 60.0, "the host texture's material differs: {p:.1} dB");
+    assert_eq!(x.depth, y.depth, "pixel depth offset differs");
+
+    mat.trace.edges = EdgeMode::Clamp;
+    let e = GpuMaterial::with_height_resource(&g.ctx, &g.pipelines, &mat, Technique::Exact, &resource, None)
+        .err()
+        .expect("edge modes differ");
+    assert!(e.to_string().contains("same edge mode"), "{e}");
 }
