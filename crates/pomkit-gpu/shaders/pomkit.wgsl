@@ -281,11 +281,12 @@ fn pomkit_lod_weight(level: f32, threshold: f32) -> f32 {
 // Tevs, Ihrke & Seidel 2008) with ray / bilinear-patch quadratics, the twin of pomkit_core
 // trace.rs `exact_first_hit` (docs/REFERENCES.md).
 //
-// Differences from the CPU (which works in f64): f32 throughout, so the nudge that picks the
-// cell a ray enters is 1e-3 texel rather than 1e-9, and the walk is capped at
-// POMKIT_EXACT_MAX_STEPS. Fetches are counted as the CPU counts them: one gather per 2x2
-// sibling block of pyramid cells and one per bilinear patch, kept while the ray walks between
-// them.
+// Differences from the CPU (which works in f64): f32 throughout, and the walk is capped at
+// POMKIT_EXACT_MAX_STEPS. As on the CPU, the cell a ray enters is chosen by its direction on a
+// wall, and patch quadratics are formed at the segment's start, so f32 stays within 0.006
+// texel of the f64 walk (docs/GPU.md). Fetches are counted as the CPU counts them: one gather
+// per 2x2 sibling block of pyramid cells and one per bilinear patch, kept while the ray walks
+// between them.
 //
 // Coordinates: texel units, x along u and y along v (texel (i, j) has its centre at
 // (i + 0.5, j + 0.5)); z is depth in [0, 1]. A ray is o + t d.
@@ -317,10 +318,11 @@ fn pomkit_level_cells(n: i32, level: u32) -> i32 {
 }
 
 /// One axis of `pomkit_cell_at`: the cell index and its walls.
-fn pomkit_cell_axis(p: f32, n: i32, level: u32, edges: u32) -> vec3<f32> {
+fn pomkit_cell_axis(p: f32, dp: f32, n: i32, level: u32, edges: u32) -> vec3<f32> {
     let size = 1 << level;
     let cells = pomkit_level_cells(n, level);
-    let fp = floor(p);
+    // On a wall, the cell the ray enters (pomkit_core trace.rs `cell_at`).
+    let fp = select(floor(p), ceil(p) - 1.0, dp < 0.0);
     if edges == POMKIT_WRAP {
         let tile = floor(fp / f32(n));
         let local = clamp(i32(fp - tile * f32(n)), 0, n - 1);
@@ -341,10 +343,10 @@ fn pomkit_cell_axis(p: f32, n: i32, level: u32, edges: u32) -> vec3<f32> {
     return vec3<f32>(f32(c), lo, hi);
 }
 
-fn pomkit_cell_at(map: PomkitMap, level: u32, p: vec2<f32>) -> PomkitCell {
+fn pomkit_cell_at(map: PomkitMap, level: u32, p: vec2<f32>, d: vec3<f32>) -> PomkitCell {
     let size = vec2<i32>(map.size);
-    let ax = pomkit_cell_axis(p.x, size.x, level, map.edges);
-    let ay = pomkit_cell_axis(p.y, size.y, level, map.edges);
+    let ax = pomkit_cell_axis(p.x, d.x, size.x, level, map.edges);
+    let ay = pomkit_cell_axis(p.y, d.y, size.y, level, map.edges);
     return PomkitCell(i32(ax.x), i32(ay.x), vec2<f32>(ax.y, ay.y), vec2<f32>(ax.z, ay.z));
 }
 
@@ -407,13 +409,17 @@ fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<functio
     let b = s10 - s00;
     let c = s01 - s00;
     let e = s00 - s10 - s01 + s11;
-    let fx0 = o.x - (i + 0.5);
-    let fy0 = o.y - (j + 0.5);
+    // g relative to the segment's start, u = t - ta in [0, ub]: the ray's origin may lie
+    // thousands of texels away, and f32 coefficients formed there cancel.
+    let p0 = o + d * ta;
+    let ub = tb - ta;
+    let fx0 = p0.x - (i + 0.5);
+    let fy0 = p0.y - (j + 0.5);
     // g(t) = z(t) - S(x(t), y(t)) = qa t^2 + qb t + qc; at or below the surface where g >= 0.
     let qa = -e * d.x * d.y;
     let qb = d.z - b * d.x - c * d.y - e * (fx0 * d.y + fy0 * d.x);
-    let qc = o.z - (a + b * fx0 + c * fy0 + e * fx0 * fy0);
-    if (qa * ta + qb) * ta + qc >= 0.0 {
+    let qc = p0.z - (a + b * fx0 + c * fy0 + e * fx0 * fy0);
+    if qc >= 0.0 {
         return ta;
     }
     var best = POMKIT_BIG;
@@ -421,7 +427,7 @@ fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<functio
     if abs(qa) <= 1e-6 * scale {
         if qb != 0.0 {
             let r = -qc / qb;
-            if r > ta && r <= tb {
+            if r > 0.0 && r <= ub {
                 best = r;
             }
         }
@@ -436,18 +442,18 @@ fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<functio
                 r1 = q / qa;
                 r2 = qc / q;
             }
-            if r1 > ta && r1 <= tb {
+            if r1 > 0.0 && r1 <= ub {
                 best = min(best, r1);
             }
-            if r2 > ta && r2 <= tb {
+            if r2 > 0.0 && r2 <= ub {
                 best = min(best, r2);
             }
         }
     }
     if best < POMKIT_BIG {
-        return best;
+        return min(ta + best, tb);
     }
-    if (qa * tb + qb) * tb + qc >= 0.0 {
+    if (qa * ub + qb) * ub + qc >= 0.0 {
         return tb;
     }
     return -1.0;
@@ -500,17 +506,34 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
         blocks[k] = vec2<i32>(-2147483647);
     }
     var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
-    let speed = max(max(abs(d.x), abs(d.y)), 1.0);
-    let nudge = max(1e-3 / speed, 1e-7);
     var t = t0;
     var level = 0u;
     for (var it = 0u; it < POMKIT_EXACT_MAX_STEPS; it++) {
         if t > t1 {
             break;
         }
-        let probe = o + d * min(t + nudge, t1);
-        let c = pomkit_cell_at(map, level, probe.xy);
-        let t_exit = pomkit_exit_time(c, o, d, t, t1);
+        var probe = (o + d * t).xy;
+        var c = pomkit_cell_at(map, level, probe, d);
+        var t_exit = pomkit_exit_time(c, o, d, t, t1);
+        if !(t_exit > t) && t < t1 {
+            // Rounding put the point on the wrong side of a wall the ray is leaving: step half a
+            // texel across it (trace.rs `entered_cell`).
+            if d.x > 0.0 && (c.hi.x - o.x) / d.x <= t {
+                probe.x = c.hi.x + 0.5;
+            } else if d.x < 0.0 && (c.lo.x - o.x) / d.x <= t {
+                probe.x = c.lo.x - 0.5;
+            }
+            if d.y > 0.0 && (c.hi.y - o.y) / d.y <= t {
+                probe.y = c.hi.y + 0.5;
+            } else if d.y < 0.0 && (c.lo.y - o.y) / d.y <= t {
+                probe.y = c.lo.y - 0.5;
+            }
+            c = pomkit_cell_at(map, level, probe, d);
+            t_exit = pomkit_exit_time(c, o, d, t, t1);
+            if !(t_exit > t) {
+                break;
+            }
+        }
         let key = pomkit_block_key(map, c, level);
         let slot = min(level, 15u);
         if any(blocks[slot] != key) {
@@ -527,7 +550,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
                 break;
             }
             if level < top {
-                let parent = pomkit_cell_at(map, level + 1u, probe.xy);
+                let parent = pomkit_cell_at(map, level + 1u, probe, d);
                 if pomkit_exit_time(parent, o, d, t, t1) <= t_exit {
                     level += 1u;
                 }
@@ -902,9 +925,9 @@ fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampl
         // The receiver may lie below the exact surface (pom's linear segments cut under the
         // bilinear surface; coarser mips differ from mip 0): an exact ray from there shadows
         // itself in speckles. Lift it onto the exact surface (one fetch), then a hair above it
-        // (f32: 1e-4 of the depth range; the CPU uses 1e-5 in f64).
+        // (1e-5 of the depth range, as the CPU).
         let on_surface = min(depth, pomkit_depth_at(heights, samp, uv, 0.0));
-        let eps = 1e-4;
+        let eps = 1e-5;
         let z0 = max(on_surface - eps, 0.0);
         let o = vec3<f32>(uv * map.size, z0);
         let d = vec3<f32>(s * map.size, -1.0);

@@ -12,6 +12,7 @@ pub mod host;
 pub mod library;
 pub mod material;
 pub mod pipeline;
+pub mod probe;
 pub mod renderer;
 pub mod util;
 
