@@ -185,17 +185,27 @@ fn pomkit_light_ray(ts: vec3<f32>, uv_scale: vec2<f32>) -> vec3<f32> {
     return vec3<f32>(ts.x * sqrt(s.y / s.x), -ts.y * sqrt(s.x / s.y), ts.z);
 }
 
+/// `v` scaled to unit length, for any finite non-zero length (it is first divided by its
+/// largest component, so its square neither overflows nor underflows); zero for a zero or
+/// non-finite `v`.
+fn pomkit_unit(v: vec3<f32>) -> vec3<f32> {
+    let m = max(max(abs(v.x), abs(v.y)), abs(v.z));
+    if !(m > 0.0 && m <= 3.4028235e38) {
+        return vec3<f32>(0.0);
+    }
+    let w = v / m;
+    return w * inverseSqrt(dot(w, w));
+}
+
 /// The view ray of a pixel for `pomkit_trace`: `view_ts` is the eye-to-point vector in tangent
 /// space (any length). Returns the unit direction in ray terms, steepened to `POMKIT_MIN_COS`,
 /// with w = 1; or w = 0 when the ray does not enter the surface (it comes from below or is
 /// zero).
 fn pomkit_view_ray(view_ts: vec3<f32>, uv_scale: vec2<f32>) -> vec4<f32> {
-    let dir = pomkit_light_ray(view_ts, uv_scale);
-    let l2 = dot(dir, dir);
-    if !(l2 > 0.0) {
+    let d = pomkit_unit(pomkit_light_ray(view_ts, uv_scale));
+    if !(dot(d, d) > 0.0) {
         return vec4<f32>(0.0);
     }
-    let d = dir * inverseSqrt(l2);
     if d.z >= 0.0 {
         return vec4<f32>(0.0);
     }
@@ -902,11 +912,10 @@ fn pomkit_receiver(technique: u32, heights: texture_2d<f32>, samp: sampler, hit:
 /// gives 0 with no fetch (Tatarchuk 2006 skips the trace there; test the geometric N.L yourself
 /// to skip the call).
 fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv_in: vec2<f32>, depth_in: f32, light: vec3<f32>, lod: f32) -> PomkitShadow {
-    let l2 = dot(light, light);
-    if !(l2 > 0.0) || l2 > 1e30 {
+    let l = pomkit_unit(light);
+    if !(dot(l, l) > 0.0) {
         return PomkitShadow(1.0, 0u);
     }
-    let l = light * inverseSqrt(l2);
     if l.z <= 0.0 {
         return PomkitShadow(0.0, 0u);
     }

@@ -61,7 +61,7 @@ pub struct ProbeRay {
     /// Entry point in UV (any tile).
     pub uv: Vec2,
     /// Direction in ray terms (u, v, depth), as [`Ray::dir`]: `z < 0` enters the surface. Any
-    /// length whose square is a normal f32 (about 1e-19 to 1e19); zero does not enter.
+    /// finite length; zero does not enter.
     pub dir: Vec3,
     /// Mip level the marching techniques read (`exact` reads mip 0).
     pub lod: f32,

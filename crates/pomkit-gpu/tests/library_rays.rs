@@ -288,6 +288,21 @@ fn angle_sets() -> Vec<RaySet> {
         .collect()
 }
 
+/// The 75-degree rays with direction vectors of lengths 1e-30 and 1e30: pomkit-core normalizes
+/// any finite vector, and so must the library (its squared length would under- or overflow f32).
+fn extreme_length_sets() -> Vec<RaySet> {
+    [1e-30f32, 1e30]
+        .into_iter()
+        .map(|scale| RaySet {
+            name: format!("75 deg, |dir| = {scale:e}"),
+            rays: ray_set(75.0, RAYS / 2, 4).into_iter().map(|r| Ray::new(r.uv, r.dir * scale)).collect(),
+            uv_slack: 0.0,
+            march_share: MARCH_SHARE,
+            exact_share: EXACT_SHARE,
+        })
+        .collect()
+}
+
 /// 85 to 89.5 degrees in steps of 0.5.
 fn grazing_set() -> RaySet {
     let mut rays = Vec::new();
@@ -315,8 +330,7 @@ fn far_set(offset: Vec2, angle: f32) -> RaySet {
     let rays: Vec<Ray> = ray_set(angle, RAYS / 2, 3).into_iter().map(|r| Ray::new(r.uv + offset, r.dir)).collect();
     let ulp = |x: f32| f64::from(f32::from_bits(x.abs().to_bits() + 1) - x.abs());
     let slack = ulp(offset.x.abs().max(offset.y.abs()) + 1.0) * f64::from(SIZE);
-    // The shipped exact walk can stick on a texel wall it starts on (entry UVs this far out are
-    // multiples of 2 texels): docs/GPU.md, "The shader library against pomkit-core".
+    // Entry UVs this far out are multiples of 2 texels: rays start on texel walls.
     let exact_share = if offset.abs().max_element() >= 1e4 { EXACT_SHARE_WALLS } else { EXACT_SHARE };
     RaySet {
         name: format!("{angle} deg at ({}, {})", offset.x, offset.y),
@@ -429,6 +443,7 @@ fn every_technique_traces_as_core_does() {
     sets.push(steepened_set());
     sets.push(far_set(Vec2::new(1000.0, -3000.0), 75.0));
     sets.push(far_set(Vec2::new(1e5, -1e5), 75.0));
+    sets.extend(extreme_length_sets());
     failures.extend(compare_sets(&ctx, &probe, &bricks, &sets, &mut table));
 
     let cobbles = surface(&ctx, &passes, Pattern::Cobblestones, EdgeMode::Wrap);
