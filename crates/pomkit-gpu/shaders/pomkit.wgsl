@@ -884,16 +884,25 @@ fn pomkit_trace_in_tile(technique: u32, heights: texture_2d<f32>, pyramid: textu
     }
 }
 
-/// The depth to shade and shadow from. Steep parallax stops on the first layer *below* the
-/// surface, up to one layer deep; a shadow ray started there shadows itself in contour rings.
-/// For `steep` this lifts the receiver onto the surface (one more fetch); other techniques'
-/// hits are returned unchanged.
+/// The hit lifted onto the height surface sampled at mip `lod`: its depth becomes the smaller
+/// of its own and the surface's at its UV (one fetch). Call it before `pomkit_shadow` with
+/// hard or soft shadows, which march that surface: a receiver below it (steep parallax stops
+/// up to one layer deep, pom's linear segments cut under convex slopes, `exact` hits mip 0
+/// while the march reads mip `lod`) shadows itself in contour lines and dashes along steep
+/// slopes.
+fn pomkit_lift_to_surface(heights: texture_2d<f32>, samp: sampler, hit: PomkitHit, lod: f32) -> PomkitHit {
+    let d = pomkit_depth_at(heights, samp, hit.uv, lod);
+    return PomkitHit(hit.uv, min(hit.depth, d), hit.fetches + 1u);
+}
+
+/// The receiver pomkit's own renderers shade and shadow from (pomkit-cpu and `render.wgsl`
+/// agree on it): `steep`'s hit lifted with `pomkit_lift_to_surface`, other techniques' hits
+/// unchanged. A host that wants no self-shadow acne at all lifts every technique's hit.
 fn pomkit_receiver(technique: u32, heights: texture_2d<f32>, samp: sampler, hit: PomkitHit, lod: f32) -> PomkitHit {
     if technique != POMKIT_STEEP {
         return hit;
     }
-    let d = pomkit_depth_at(heights, samp, hit.uv, lod);
-    return PomkitHit(hit.uv, min(hit.depth, d), hit.fetches + 1u);
+    return pomkit_lift_to_surface(heights, samp, hit, lod);
 }
 
 // ===== module shadow =====
