@@ -9,8 +9,8 @@ use pomkit_core::{EdgeMode, HeightField};
 use pomkit_io::output::{OutputId, Outputs};
 use pomkit_io::{PixelLayout, Pixels};
 
-use crate::HeightInput;
-use crate::progress;
+use crate::batch::{self, BatchArgs};
+use crate::{HeightRead, progress};
 
 #[derive(Subcommand, Debug)]
 pub enum BakeVerb {
@@ -22,6 +22,22 @@ pub enum BakeVerb {
     Pack(PackArgs),
 }
 
+/// The height maps to bake and how to read them.
+#[derive(Args, Debug)]
+pub struct BakeInputs {
+    /// Height map: an image file (PNG, JPEG, TIFF, EXR; 8/16-bit or float), or `builtin:NAME`
+    /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves), optionally
+    /// sized as `builtin:NAME:WxH` (default 512x512). Several inputs, folders (their png, jpg,
+    /// tif and exr files) and quoted globs bake a whole library: OUT is then a folder (see
+    /// --name, --recursive).
+    #[arg(value_name = "IN", required = true, num_args = 1..)]
+    pub(crate) inputs: Vec<String>,
+    #[command(flatten)]
+    pub(crate) read: HeightRead,
+    #[command(flatten)]
+    pub(crate) batch: BatchArgs,
+}
+
 /// Options shared by every map derived from slopes.
 #[derive(Args, Debug, Clone)]
 pub struct SlopeArgs {
@@ -29,22 +45,22 @@ pub struct SlopeArgs {
     /// gives flat normals (every texel +Z); a negative scale inverts the relief (reads the map
     /// as depth). At most 1e18 in magnitude, beyond which the normals overflow f32.
     #[arg(long, default_value_t = 8.0, allow_negative_numbers = true)]
-    scale: f32,
+    pub(crate) scale: f32,
     /// Slope filter: central differences (sharp) or the 3x3 Sobel operator (smoother).
     #[arg(long, value_enum, default_value_t = FilterArg::Central)]
-    filter: FilterArg,
+    pub(crate) filter: FilterArg,
     /// Border texels: wrap (tiling textures) or clamp.
     #[arg(long, value_enum, default_value_t = EdgesArg::Wrap)]
-    edges: EdgesArg,
+    pub(crate) edges: EdgesArg,
 }
 
-#[derive(ValueEnum, Clone, Copy, Debug)]
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FilterArg {
     Central,
     Sobel,
 }
 
-#[derive(ValueEnum, Clone, Copy, Debug)]
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EdgesArg {
     Wrap,
     Clamp,
@@ -76,8 +92,8 @@ impl SlopeArgs {
 #[derive(Args, Debug)]
 pub struct NormalArgs {
     #[command(flatten)]
-    input: HeightInput,
-    /// Output file: PNG for rgb8 and rg8, EXR for float.
+    input: BakeInputs,
+    /// Output file: PNG for rgb8 and rg8, EXR for float. With several inputs, a folder.
     #[arg(short, long)]
     output: PathBuf,
     #[command(flatten)]
@@ -101,8 +117,8 @@ pub enum NormalEncoding {
 #[derive(Args, Debug)]
 pub struct ParallaxArgs {
     #[command(flatten)]
-    input: HeightInput,
-    /// Output file: PNG for r8, EXR for float.
+    input: BakeInputs,
+    /// Output file: PNG for r8, EXR for float. With several inputs, a folder.
     #[arg(short, long)]
     output: PathBuf,
     #[command(flatten)]
@@ -122,8 +138,8 @@ pub enum ParallaxEncoding {
 #[derive(Args, Debug)]
 pub struct PackArgs {
     #[command(flatten)]
-    input: HeightInput,
-    /// Output RGBA PNG.
+    input: BakeInputs,
+    /// Output RGBA PNG. With several inputs, a folder.
     #[arg(short, long)]
     output: PathBuf,
     #[command(flatten)]
@@ -133,19 +149,101 @@ pub struct PackArgs {
     y_down: bool,
 }
 
-pub fn run(verb: &BakeVerb) -> Result<()> {
-    match verb {
-        BakeVerb::Normal(a) => normal(a),
-        BakeVerb::Parallax(a) => parallax(a),
-        BakeVerb::Pack(a) => pack(a),
+/// What to bake from one height map: the verb and its per-file options (the command line's,
+/// or a batch config's overrides of them).
+#[derive(Clone, Debug)]
+pub(crate) struct Job {
+    /// Which map, in which encoding.
+    pub(crate) kind: Kind,
+    /// Slope scale, filter and edges.
+    pub(crate) slope: SlopeArgs,
+    /// Store +Y down (normal and pack).
+    pub(crate) y_down: bool,
+    /// How to read the height map.
+    pub(crate) read: HeightRead,
+}
+
+/// A bake verb and its encoding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Kind {
+    /// `bake normal`.
+    Normal(NormalEncoding),
+    /// `bake parallax`.
+    Parallax(ParallaxEncoding),
+    /// `bake pack`.
+    Pack,
+}
+
+impl Kind {
+    /// The verb's name.
+    pub(crate) fn verb(self) -> &'static str {
+        match self {
+            Kind::Normal(_) => "normal",
+            Kind::Parallax(_) => "parallax",
+            Kind::Pack => "pack",
+        }
     }
+
+    /// The pixel layout written.
+    pub(crate) fn layout(self) -> PixelLayout {
+        match self {
+            Kind::Normal(NormalEncoding::Rgb8 | NormalEncoding::Rg8) => PixelLayout::Rgb8,
+            Kind::Normal(NormalEncoding::Float) => PixelLayout::RgbF32,
+            Kind::Parallax(ParallaxEncoding::R8) => PixelLayout::Gray8,
+            Kind::Parallax(ParallaxEncoding::Float) => PixelLayout::GrayF32,
+            Kind::Pack => PixelLayout::Rgba8,
+        }
+    }
+
+    /// The output file's extension.
+    pub(crate) fn extension(self) -> &'static str {
+        if matches!(self.layout(), PixelLayout::GrayF32 | PixelLayout::RgbF32) { "exr" } else { "png" }
+    }
+}
+
+pub fn run(verb: &BakeVerb) -> Result<()> {
+    let (job, inputs, output) = match verb {
+        BakeVerb::Normal(a) => (
+            Job {
+                kind: Kind::Normal(a.encoding),
+                slope: a.slope.clone(),
+                y_down: a.y_down,
+                read: a.input.read.clone(),
+            },
+            &a.input,
+            &a.output,
+        ),
+        BakeVerb::Parallax(a) => (
+            Job { kind: Kind::Parallax(a.encoding), slope: a.slope.clone(), y_down: false, read: a.input.read.clone() },
+            &a.input,
+            &a.output,
+        ),
+        BakeVerb::Pack(a) => (
+            Job { kind: Kind::Pack, slope: a.slope.clone(), y_down: a.y_down, read: a.input.read.clone() },
+            &a.input,
+            &a.output,
+        ),
+    };
+    if batch::is_batch(&inputs.inputs, &inputs.batch) {
+        return batch::run(&job, &inputs.inputs, &inputs.batch, output);
+    }
+    let (w, h) = bake_file(&job, &inputs.inputs[0], output, true)?;
+    match job.kind {
+        Kind::Normal(encoding) => {
+            eprintln!("wrote {} ({w}x{h} normal map, {encoding:?}, scale {})", output.display(), job.slope.scale);
+        }
+        Kind::Parallax(encoding) => eprintln!("wrote {} ({w}x{h} parallax map, {encoding:?})", output.display()),
+        Kind::Pack => eprintln!("wrote {} ({w}x{h} normal + height map)", output.display()),
+    }
+    Ok(())
 }
 
 /// Checks the output and the options, then loads the input, before any heavy work, so a bad
 /// flag or output fails fast. The output is staged in the returned [`Outputs`] (which refuses
 /// to overwrite the input) and appears only when the caller commits it.
 fn prepare(
-    input: &HeightInput,
+    input: &str,
+    read: &HeightRead,
     opts: &NormalBakeOptions,
     output: &Path,
     layout: PixelLayout,
@@ -160,79 +258,58 @@ fn prepare(
         );
     }
     let mut outs = Outputs::new();
-    if !input.input.starts_with("builtin:") {
-        outs.input(&input.input);
+    if !input.starts_with("builtin:") {
+        outs.input(input);
     }
     let id = outs.output(output);
     outs.check()?;
-    let field = input.load()?;
-    opts.validate(&field).with_context(|| format!("cannot bake {}", input.input))?;
+    let field = crate::load_height(input, read)?;
+    opts.validate(&field).with_context(|| format!("cannot bake {input}"))?;
     Ok((field, outs, id))
 }
 
-fn normal(a: &NormalArgs) -> Result<()> {
-    let opts = a.slope.options(a.y_down);
-    let layout = match a.encoding {
-        NormalEncoding::Rgb8 | NormalEncoding::Rg8 => PixelLayout::Rgb8,
-        NormalEncoding::Float => PixelLayout::RgbF32,
-    };
-    let (field, mut outs, id) = prepare(&a.input, &opts, &a.output, layout)?;
+/// Bakes `job` from the height map `input` into `output`, atomically; `bars` shows progress
+/// bars for big maps (single mode; a batch shows its own). Returns the map's size.
+pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Result<(u32, u32)> {
+    let opts = job.slope.options(job.y_down);
+    let layout = job.kind.layout();
+    let (field, mut outs, id) = prepare(input, &job.read, &opts, output, layout)?;
     let (w, h) = (field.width(), field.height());
-    let pb = progress::bar(u64::from(h), u64::from(w), "baking");
+    let pb = if bars { progress::bar(u64::from(h), u64::from(w), "baking") } else { indicatif::ProgressBar::hidden() };
     let tick = |rows: u32| pb.inc(u64::from(rows));
-    match a.encoding {
-        NormalEncoding::Rgb8 | NormalEncoding::Rg8 => {
+    match job.kind {
+        Kind::Normal(encoding @ (NormalEncoding::Rgb8 | NormalEncoding::Rg8)) => {
             let mut px = vec![[0u8; 3]; field.depths().len()];
             bake::bake_normals_rgb8(&field, &opts, &mut px, &tick)?;
-            if a.encoding == NormalEncoding::Rg8 {
+            if encoding == NormalEncoding::Rg8 {
                 // Two-channel storage: z is rebuilt on read (eq. 7.44), blue carries nothing.
                 px.iter_mut().for_each(|p| p[2] = 0);
             }
             pb.finish_and_clear();
             outs.write_image(id, w, h, layout, Pixels::U8(px.as_flattened()))?;
         }
-        NormalEncoding::Float => {
+        Kind::Normal(NormalEncoding::Float) => {
             let mut px = vec![[0.0f32; 3]; field.depths().len()];
             bake::bake_normals_into(&field, &opts, &mut px, |n| n.to_array(), &tick)?;
             pb.finish_and_clear();
             outs.write_image(id, w, h, layout, Pixels::F32(px.as_flattened()))?;
         }
-    }
-    outs.commit()?;
-    eprintln!("wrote {} ({w}x{h} normal map, {:?}, scale {})", a.output.display(), a.encoding, opts.scale);
-    Ok(())
-}
-
-fn parallax(a: &ParallaxArgs) -> Result<()> {
-    let opts = a.slope.options(false);
-    let layout = match a.encoding {
-        ParallaxEncoding::R8 => PixelLayout::Gray8,
-        ParallaxEncoding::Float => PixelLayout::GrayF32,
-    };
-    let (field, mut outs, id) = prepare(&a.input, &opts, &a.output, layout)?;
-    let (w, h) = (field.width(), field.height());
-    let values = bake::bake_parallax(&field, &opts)?;
-    match a.encoding {
-        ParallaxEncoding::R8 => {
-            let px: Vec<u8> = values.iter().map(|&v| ((v * 0.5 + 0.5) * 255.0).round() as u8).collect();
-            outs.write_image(id, w, h, layout, Pixels::U8(&px))?;
+        Kind::Parallax(encoding) => {
+            let values = bake::bake_parallax(&field, &opts)?;
+            match encoding {
+                ParallaxEncoding::R8 => {
+                    let px: Vec<u8> = values.iter().map(|&v| ((v * 0.5 + 0.5) * 255.0).round() as u8).collect();
+                    outs.write_image(id, w, h, layout, Pixels::U8(&px))?;
+                }
+                ParallaxEncoding::Float => outs.write_image(id, w, h, layout, Pixels::F32(&values))?,
+            }
         }
-        ParallaxEncoding::Float => outs.write_image(id, w, h, layout, Pixels::F32(&values))?,
+        Kind::Pack => {
+            let px = bake::bake_packed_rgba8(&field, &opts, &tick)?;
+            pb.finish_and_clear();
+            outs.write_image(id, w, h, layout, Pixels::U8(px.as_flattened()))?;
+        }
     }
     outs.commit()?;
-    eprintln!("wrote {} ({w}x{h} parallax map, {:?})", a.output.display(), a.encoding);
-    Ok(())
-}
-
-fn pack(a: &PackArgs) -> Result<()> {
-    let opts = a.slope.options(a.y_down);
-    let (field, mut outs, id) = prepare(&a.input, &opts, &a.output, PixelLayout::Rgba8)?;
-    let (w, h) = (field.width(), field.height());
-    let pb = progress::bar(u64::from(h), u64::from(w), "baking");
-    let px = bake::bake_packed_rgba8(&field, &opts, &|rows| pb.inc(u64::from(rows)))?;
-    pb.finish_and_clear();
-    outs.write_image(id, w, h, PixelLayout::Rgba8, Pixels::U8(px.as_flattened()))?;
-    outs.commit()?;
-    eprintln!("wrote {} ({w}x{h} normal + height map)", a.output.display());
-    Ok(())
+    Ok((w, h))
 }

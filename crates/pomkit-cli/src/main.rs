@@ -3,6 +3,7 @@
 
 mod backend;
 mod bake;
+mod batch;
 mod bench;
 mod compare;
 mod output;
@@ -90,18 +91,6 @@ fn view(args: &ViewArgs) -> Result<()> {
     Ok(())
 }
 
-/// Where a height map comes from and how to read it, as a positional `IN` (the `bake` verbs).
-#[derive(Args, Debug, Clone)]
-struct HeightInput {
-    /// Height map: an image file (PNG, JPEG, TIFF, EXR; 8/16-bit or float), or `builtin:NAME`
-    /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves), optionally
-    /// sized as `builtin:NAME:WxH` (default 512x512).
-    #[arg(value_name = "IN")]
-    input: String,
-    #[command(flatten)]
-    read: HeightRead,
-}
-
 /// Where a height map comes from and how to read it, as `--height H` (`trace`, `compare`).
 #[derive(Args, Debug, Clone)]
 pub(crate) struct HeightOption {
@@ -116,21 +105,21 @@ pub(crate) struct HeightOption {
 
 /// How to read a height map: shared by every verb that reads one.
 #[derive(Args, Debug, Clone)]
-struct HeightRead {
+pub(crate) struct HeightRead {
     /// The image stores depth (white = deep) instead of height (white = high).
     #[arg(long)]
-    depth_map: bool,
+    pub(crate) depth_map: bool,
     /// Channel holding the height: r, g, b, a (e.g. a normal map with height in alpha) or luma
     /// (Rec. 709 weights; the grey value of a grey image).
     #[arg(long, value_enum, default_value_t = ChannelArg::Luma)]
-    channel: ChannelArg,
+    pub(crate) channel: ChannelArg,
     /// Rescale values so the lowest becomes 0 and the highest 1 (for float maps in world units).
     #[arg(long)]
-    normalize: bool,
+    pub(crate) normalize: bool,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-enum ChannelArg {
+pub(crate) enum ChannelArg {
     R,
     G,
     B,
@@ -150,13 +139,6 @@ impl From<ChannelArg> for Channel {
     }
 }
 
-impl HeightInput {
-    /// Loads the height field this input names.
-    fn load(&self) -> Result<HeightField> {
-        load_height(&self.input, &self.read)
-    }
-}
-
 impl HeightOption {
     /// Loads the height field this option names.
     pub(crate) fn load(&self) -> Result<HeightField> {
@@ -165,7 +147,7 @@ impl HeightOption {
 }
 
 /// Loads the height field `input` names (a file or `builtin:NAME[:WxH]`), read as `read` says.
-fn load_height(input: &str, read: &HeightRead) -> Result<HeightField> {
+pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField> {
     if let Some(spec) = input.strip_prefix("builtin:") {
         // As scene files do (docs/SCENES.md): these flags say how to read an image's values, and
         // a built-in map has none to read. (--depth-map inverts it, as documented.)
