@@ -197,7 +197,7 @@ impl Kind {
 
     /// The output file's extension.
     pub(crate) fn extension(self) -> &'static str {
-        if matches!(self.layout(), PixelLayout::GrayF32 | PixelLayout::RgbF32) { "exr" } else { "png" }
+        if self.layout().is_float() { "exr" } else { "png" }
     }
 }
 

@@ -18,6 +18,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Deserialize;
 
+use pomkit_io::output::regular_file_key;
+
 use crate::ChannelArg;
 use crate::bake::{EdgesArg, FilterArg, Job, Kind, NormalEncoding, ParallaxEncoding};
 
@@ -136,8 +138,11 @@ pub(crate) fn run(job: &Job, inputs: &[String], args: &BatchArgs, out: &Path) ->
 
     // Every output path, decided before baking: collisions and outputs over inputs fail their
     // file; existing outputs are skipped unless --overwrite.
-    let input_keys: HashMap<FileKey, usize> =
-        items.iter().enumerate().filter_map(|(i, item)| file_key(Path::new(&item.input)).map(|k| (k, i))).collect();
+    let input_keys: HashMap<pomkit_io::output::FileKey, usize> = items
+        .iter()
+        .enumerate()
+        .filter_map(|(i, item)| regular_file_key(Path::new(&item.input)).map(|k| (k, i)))
+        .collect();
     let mut claimed: HashMap<PathBuf, usize> = HashMap::new();
     let mut plans: Vec<(Option<PathBuf>, Option<String>, Job)> = Vec::with_capacity(items.len());
     for (i, item) in items.iter().enumerate() {
@@ -147,7 +152,7 @@ pub(crate) fn run(job: &Job, inputs: &[String], args: &BatchArgs, out: &Path) ->
         if problem.is_none() {
             if let Some(&first) = claimed.get(&output) {
                 problem = Some(format!("{} is also the output of {}", output.display(), items[first].input));
-            } else if let Some(&j) = file_key(&output).as_ref().and_then(|k| input_keys.get(k)) {
+            } else if let Some(&j) = regular_file_key(&output).as_ref().and_then(|k| input_keys.get(k)) {
                 problem = Some(format!(
                     "its output {} is the input {}: refusing to write over it",
                     output.display(),
@@ -296,7 +301,7 @@ fn collect(inputs: &[String], recursive: bool) -> Result<Vec<Item>> {
     }
     // Each file once, the first place it was found winning.
     let mut seen = std::collections::HashSet::new();
-    items.retain(|item| match file_key(Path::new(&item.input)) {
+    items.retain(|item| match regular_file_key(Path::new(&item.input)) {
         Some(key) => seen.insert(key),
         None => true,
     });
@@ -358,24 +363,6 @@ fn file_item(path: &Path, base: &Path) -> Item {
         Err(e) => (None, Some(format!("cannot read it: {e}"))),
     };
     Item { input: path.to_string_lossy().into_owned(), rel_dir, name, bytes, problem }
-}
-
-#[cfg(unix)]
-type FileKey = (u64, u64);
-#[cfg(not(unix))]
-type FileKey = PathBuf;
-
-/// What identifies an existing file (device and inode), so that links and different spellings
-/// of one path compare equal; `None` when it does not exist.
-#[cfg(unix)]
-fn file_key(path: &Path) -> Option<FileKey> {
-    use std::os::unix::fs::MetadataExt;
-    std::fs::metadata(path).ok().filter(std::fs::Metadata::is_file).map(|m| (m.dev(), m.ino()))
-}
-
-#[cfg(not(unix))]
-fn file_key(path: &Path) -> Option<FileKey> {
-    std::fs::canonicalize(path).ok().filter(|p| p.is_file())
 }
 
 // ---------------------------------------------------------------------------------------------

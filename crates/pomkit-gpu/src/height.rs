@@ -194,6 +194,14 @@ impl HeightMaps {
     /// # Errors
     /// [`GpuError::Unsupported`] if `depths.len()` is not `width * height`.
     pub fn upload_depths(&self, ctx: &GpuContext, depths: &[f32]) -> Result<(), GpuError> {
+        self.write_depths(&ctx.queue, depths)
+    }
+
+    /// [`HeightMaps::upload_depths`] through a queue of the caller's own.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] if `depths.len()` is not `width * height`.
+    pub fn write_depths(&self, queue: &wgpu::Queue, depths: &[f32]) -> Result<(), GpuError> {
         let expected = self.width as usize * self.height as usize;
         if depths.len() != expected {
             return Err(GpuError::Unsupported(format!(
@@ -210,7 +218,7 @@ impl HeightMaps {
                 [d, 0.0, 0.0, 0.0]
             })
             .collect();
-        ctx.queue.write_texture(
+        queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.heights,
                 mip_level: 0,
@@ -371,10 +379,7 @@ impl HeightPasses {
         timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
     ) {
         let size = (maps.width, maps.height);
-        let edges = match opts.edges {
-            EdgeMode::Wrap => 0,
-            EdgeMode::Clamp => 1,
-        };
+        let edges = crate::library::edges_index(opts.edges);
         let filter = match opts.filter {
             NormalFilter::Central => 0,
             NormalFilter::Sobel => 1,

@@ -72,7 +72,7 @@ use wgpu::util::DeviceExt;
 
 use crate::GpuError;
 use crate::height::{HeightMaps, HeightPassOptions, HeightPasses};
-use crate::util::{Std140, rgba16f_bytes};
+use crate::util::{Std140, texture_entry};
 
 /// Side of the square compute workgroups in `import.wgsl`.
 const WORKGROUP: u32 = 8;
@@ -404,7 +404,7 @@ impl HeightResource {
             let maps = HeightMaps::with_device(device, width, height, label).map_err(|e| gpu_error(e, label))?;
             let sampler = sampler(device, opts.edges, label);
             let resource = Self { maps, sampler, opts: *opts, import: None, label: label.to_owned() };
-            resource.write_depths(queue, field.depths());
+            resource.maps.write_depths(queue, field.depths()).map_err(|e| gpu_error(e, label))?;
             resource.submit_rebuild(device, queue, passes);
             Ok(resource)
         })
@@ -430,8 +430,7 @@ impl HeightResource {
                 found: (field.width(), field.height()),
             });
         }
-        self.write_depths(queue, field.depths());
-        Ok(())
+        self.maps.write_depths(queue, field.depths()).map_err(|e| gpu_error(e, &self.label))
     }
 
     /// Records the rebuild of every map into `encoder`: for a resource built from a host
@@ -461,16 +460,7 @@ impl HeightResource {
     /// [`HeightResource::bind_group_entries`] gives the matching bind group entries.
     #[must_use]
     pub fn layout_entries(bindings: HeightBindings, visibility: wgpu::ShaderStages) -> [wgpu::BindGroupLayoutEntry; 3] {
-        let texture = |binding, filterable| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
+        let texture = |binding, filterable| texture_entry(binding, filterable, visibility);
         [
             texture(bindings.heights, true),
             texture(bindings.pyramid, false),
@@ -579,30 +569,6 @@ impl HeightResource {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pomkit height resource build") });
         self.encode_rebuild(device, passes, &mut encoder);
         queue.submit([encoder.finish()]);
-    }
-
-    /// Writes `depths` (`width * height` of them) into `heights` mip 0 as
-    /// [`HeightMaps::upload_depths`] does: clamped, NaN = 1, R = depth, G = B = A = 0.
-    fn write_depths(&self, queue: &wgpu::Queue, depths: &[f32]) {
-        let (w, h) = (self.maps.width, self.maps.height);
-        let texels: Vec<f32> = depths
-            .iter()
-            .flat_map(|&d| {
-                let d = if d.is_nan() { 1.0 } else { d.clamp(0.0, 1.0) };
-                [d, 0.0, 0.0, 0.0]
-            })
-            .collect();
-        queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.maps.heights,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            &rgba16f_bytes(&texels),
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(w * 8), rows_per_image: None },
-            wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
-        );
     }
 }
 

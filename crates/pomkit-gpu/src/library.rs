@@ -66,7 +66,13 @@ pub fn flatten() -> String {
 /// `host` (WGSL that calls the library) with the library in front of it.
 #[must_use]
 pub fn compose(host: &str) -> String {
-    format!("{WGSL}\n// ===== host shader =====\n\n{host}")
+    compose_with(WGSL, host)
+}
+
+/// `host` with `library` (the library's plain WGSL, or an edited copy of it) in front of it.
+#[must_use]
+pub fn compose_with(library: &str, host: &str) -> String {
+    format!("{library}\n// ===== host shader =====\n\n{host}")
 }
 
 /// The value of the library's `POMKIT_*` technique constant for `t`.
@@ -194,12 +200,6 @@ impl PomkitParams {
     #[must_use]
     pub fn layout() -> Vec<(&'static str, usize)> {
         Self::from_material(&Material::default(), Technique::Pom).block().layout()
-    }
-
-    /// Bytes [`PomkitParams::to_bytes`] writes (= [`PomkitParams::SIZE`]).
-    #[must_use]
-    pub fn default_bytes_len() -> usize {
-        Self::from_material(&Material::default(), Technique::Pom).to_bytes().len()
     }
 
     fn block(&self) -> Std140 {

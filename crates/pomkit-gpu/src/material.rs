@@ -18,7 +18,7 @@ use wgpu::util::DeviceExt;
 
 use crate::height::{HeightMaps, HeightPassOptions, HeightPasses};
 use crate::host::HeightResource;
-use crate::util::{Std140, rgba16f_bytes};
+use crate::util::{Std140, rgba16f_bytes, texture_entry};
 use crate::{GpuContext, GpuError};
 
 /// Lights the shader reads per frame.
@@ -85,19 +85,6 @@ fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGrou
     }
 }
 
-fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
 fn texture_with_mips(
     ctx: &GpuContext,
     label: &str,
@@ -155,14 +142,15 @@ impl MaterialPipelines {
             label: Some("pomkit frame"),
             entries: &[uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT)],
         });
+        let fragment = wgpu::ShaderStages::FRAGMENT;
         let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("pomkit material"),
             entries: &[
                 uniform_entry(0, wgpu::ShaderStages::FRAGMENT),
-                texture_entry(1, true),
-                texture_entry(2, true),
-                texture_entry(3, false),
-                texture_entry(4, true),
+                texture_entry(1, true, fragment),
+                texture_entry(2, true, fragment),
+                texture_entry(3, false, fragment),
+                texture_entry(4, true, fragment),
                 wgpu::BindGroupLayoutEntry {
                     binding: 5,
                     visibility: wgpu::ShaderStages::FRAGMENT,

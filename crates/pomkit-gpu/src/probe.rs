@@ -43,6 +43,7 @@ use wgpu::util::DeviceExt;
 
 use crate::height::HeightMaps;
 use crate::library::PomkitParams;
+use crate::util::texture_entry;
 use crate::{GpuContext, GpuError};
 
 /// Bytes of one `ProbeIn` record of `probe.wgsl` (two vec4).
@@ -149,21 +150,12 @@ impl RayProbe {
     }
 
     fn build(device: &wgpu::Device, library_wgsl: &str) -> Self {
-        let source = format!("{library_wgsl}\n// ===== host shader =====\n\n{}", include_str!("probe.wgsl"));
+        let source = crate::library::compose_with(library_wgsl, include_str!("probe.wgsl"));
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("pomkit ray probe"),
             source: wgpu::ShaderSource::Wgsl(source.into()),
         });
-        let texture = |binding: u32, filterable: bool| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
+        let texture = |binding, filterable| texture_entry(binding, filterable, wgpu::ShaderStages::COMPUTE);
         let buffer = |binding: u32, ty: wgpu::BufferBindingType, size: u64| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,

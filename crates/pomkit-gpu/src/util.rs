@@ -103,3 +103,18 @@ impl Std140 {
         w.words.iter().flat_map(|x| x.to_le_bytes()).collect()
     }
 }
+
+/// A bind group layout entry for a `texture_2d<f32>` (float samples, `filterable` or not).
+#[must_use]
+pub fn texture_entry(binding: u32, filterable: bool, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}

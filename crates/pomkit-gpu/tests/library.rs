@@ -44,10 +44,11 @@ fn uniform_layouts_match_the_wgsl_structs() {
     let render = parse(&pomkit_gpu::library::compose(pomkit_gpu::material::RENDER_WGSL));
     assert_layout("Material", &wgsl_struct(&render, "Material"), &pomkit_gpu::material::material_layout());
     assert_layout("Frame", &wgsl_struct(&render, "Frame"), &pomkit_gpu::material::frame_layout());
-    assert_eq!(
-        pomkit_gpu::library::PomkitParams::default_bytes_len(),
-        pomkit_gpu::library::PomkitParams::SIZE as usize
+    let params = pomkit_gpu::library::PomkitParams::from_material(
+        &pomkit_core::scene::Material::default(),
+        pomkit_core::trace::Technique::Pom,
     );
+    assert_eq!(params.to_bytes().len(), pomkit_gpu::library::PomkitParams::SIZE as usize);
 }
 
 fn constant(module: &naga::Module, name: &str) -> naga::Literal {

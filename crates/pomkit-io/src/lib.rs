@@ -584,7 +584,9 @@ impl PixelLayout {
             PixelLayout::Rgba8 | PixelLayout::RgbaF32 => 4,
         }
     }
-    fn is_float(self) -> bool {
+    /// Whether the samples are floats (written as OpenEXR).
+    #[must_use]
+    pub fn is_float(self) -> bool {
         matches!(self, PixelLayout::GrayF32 | PixelLayout::RgbF32 | PixelLayout::RgbaF32)
     }
 }

@@ -101,10 +101,22 @@ enum Identity {
     New(PathBuf),
 }
 
+/// What identifies a file whatever path, `..`, hard link or symbolic link names it: device and
+/// inode on unix, the canonical path elsewhere.
 #[cfg(unix)]
-type FileKey = (u64, u64);
+pub type FileKey = (u64, u64);
+/// What identifies a file whatever path, `..`, hard link or symbolic link names it: device and
+/// inode on unix, the canonical path elsewhere.
 #[cfg(not(unix))]
-type FileKey = PathBuf;
+pub type FileKey = PathBuf;
+
+/// The [`FileKey`] of the regular file `path` names (links followed); `None` when it names no
+/// regular file.
+#[must_use]
+pub fn regular_file_key(path: &Path) -> Option<FileKey> {
+    let meta = std::fs::metadata(path).ok().filter(std::fs::Metadata::is_file)?;
+    file_key(path, &meta).ok()
+}
 
 #[cfg(unix)]
 fn file_key(_path: &Path, meta: &std::fs::Metadata) -> std::io::Result<FileKey> {
