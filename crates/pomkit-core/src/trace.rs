@@ -403,6 +403,14 @@ impl Surface {
         &self.mips
     }
 
+    /// The parallax map's mip chain: `clamp(n_z * d, 0, 1)` per texel (Lengyel 7.51), with `n`
+    /// the central-difference normal at this surface's depth scale (what the `parallax`
+    /// technique reads; a GPU host uploads it beside the depths).
+    #[must_use]
+    pub fn parallax_mips(&self) -> &MipChain {
+        &self.parallax
+    }
+
     /// The maximum-height pyramid.
     #[must_use]
     pub fn pyramid(&self) -> &MaxHeightPyramid {

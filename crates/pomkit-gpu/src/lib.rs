@@ -6,20 +6,32 @@
 //! rebuild a height map's mips, normals, parallax map and maximum-height pyramid on the GPU, so
 //! a height field may change every frame.
 
+#[cfg(feature = "renderer")]
 pub mod context;
+#[cfg(feature = "renderer")]
 pub mod height;
+#[cfg(feature = "renderer")]
 pub mod host;
 pub mod library;
+#[cfg(feature = "renderer")]
 pub mod material;
+#[cfg(feature = "renderer")]
 pub mod pipeline;
+#[cfg(feature = "renderer")]
 pub mod probe;
+#[cfg(feature = "renderer")]
 pub mod renderer;
 pub mod util;
 
+#[cfg(feature = "renderer")]
 pub use context::GpuContext;
+#[cfg(feature = "renderer")]
 pub use host::{HeightBindings, HeightEncoding, HeightResource, HeightResourceOptions, HostError};
+#[cfg(feature = "renderer")]
 pub use material::{FrameUniforms, FrameView, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
+#[cfg(feature = "renderer")]
 pub use pipeline::{AttributeKind, PipelineError, PipelineOptions, VertexAttribute, VertexBuffer, VertexLayout};
+#[cfg(feature = "renderer")]
 pub use renderer::{GpuRenderError, GpuRenderer, GpuScene, Timings};
 
 /// Why the GPU renderer could not run.

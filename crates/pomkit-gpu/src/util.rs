@@ -105,6 +105,7 @@ impl Std140 {
 }
 
 /// A bind group layout entry for a `texture_2d<f32>` (float samples, `filterable` or not).
+#[cfg(feature = "renderer")]
 #[must_use]
 pub fn texture_entry(binding: u32, filterable: bool, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {

@@ -1,0 +1,327 @@
+//! Bevy's own parallax mapping against bevy_pomkit, in the same Bevy app, on lavapipe or a GPU:
+//!
+//! ```text
+//! cargo run --release -p bevy_pomkit --example bench
+//! ```
+//!
+//! For each method (Bevy's `Occlusion` and `Relief`, pomkit's `pom` and `exact`):
+//! - **frame time**: the demo scene (a cube on a floor, sun with shadow maps) at 960 x 540,
+//!   the median of `--frames` frames after the picture has settled;
+//! - **accuracy**: a 2 x 2 quad with imported (glTF-convention) tangents, seen at about 50
+//!   degrees, each pixel's hit UV read back (pomkit's debug output; for Bevy, an unlit
+//!   material whose albedo stores its own UV) and compared with pomkit-core's exact tracer for
+//!   the same camera ray: median and 90th percentile error in texels, share over one texel;
+//! - **fetches**: height reads per pixel, counted as a GPU makes them (pomkit's debug output;
+//!   for Bevy, its loop replayed on the CPU for the same rays, one read per `sample_depth_map`).
+//!
+//! The same quad with Bevy's generated tangents shows what their handedness does to Bevy's
+//! own parallax (last rows). docs/BENCHMARKS.md records a run.
+
+#[path = "support/headless.rs"]
+mod headless;
+#[path = "support/scene.rs"]
+mod scene;
+
+use std::time::{Duration, Instant};
+
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::Hdr;
+use bevy::camera::RenderTarget;
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::pbr::ParallaxMappingMethod;
+use bevy::prelude::*;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+use bevy_pomkit::height::depth_image;
+use bevy_pomkit::{MapKind, Pomkit, PomkitDebug, PomkitMaterial, Technique};
+use clap::Parser;
+use headless::{Frame, Headless};
+use pomkit_core::EdgeMode;
+use pomkit_core::heightfield::HeightField;
+use pomkit_core::procedural::{Pattern, generate};
+use pomkit_core::trace::{Ray, Surface, TraceParams, trace};
+use scene::{Method, SceneOptions};
+
+/// Bevy's parallax against bevy_pomkit: frame times, accuracy and fetches.
+#[derive(Parser)]
+struct Args {
+    /// Frames timed per method.
+    #[arg(long, default_value_t = 15)]
+    frames: usize,
+    /// Height pattern of the accuracy quad and the scene.
+    #[arg(long, default_value = "cobblestones")]
+    pattern: String,
+    /// Skip the frame times (accuracy and fetches only).
+    #[arg(long)]
+    no_timing: bool,
+}
+
+const MAP: u32 = 256;
+const DEPTH_SCALE: f32 = 0.08;
+/// Bevy's layer count for both of its methods, as pom's most samples.
+const LAYERS: f32 = 32.0;
+const RELIEF_STEPS: u32 = 5;
+const PW: u32 = 320;
+const PH: u32 = 240;
+
+fn methods() -> [Method; 4] {
+    [
+        Method::Bevy(ParallaxMappingMethod::Occlusion),
+        Method::Bevy(ParallaxMappingMethod::Relief { max_steps: RELIEF_STEPS }),
+        Method::Pomkit(Technique::Pom),
+        Method::Pomkit(Technique::Exact),
+    ]
+}
+
+fn main() {
+    let args = Args::parse();
+    let pattern: Pattern = match args.pattern.parse() {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::exit(2);
+        }
+    };
+    if !args.no_timing {
+        println!("| method | frame time, median of {} (ms) |", args.frames);
+        println!("|---|---|");
+        for method in methods() {
+            let ms = frame_time(method, pattern, args.frames);
+            println!("| {} | {ms:.1} |", method.name());
+        }
+        println!();
+    }
+    let field = generate(pattern, MAP, MAP);
+    let surface = Surface::new(field.clone(), EdgeMode::Wrap, DEPTH_SCALE);
+    println!("| method | tangents | median error (texels) | p90 error | over 1 texel | mean fetches | max fetches |");
+    println!("|---|---|---|---|---|---|---|");
+    for generated in [false, true] {
+        for method in methods() {
+            if generated && matches!(method, Method::Pomkit(Technique::Pom)) {
+                continue;
+            }
+            let r = accuracy(method, &field, &surface, generated);
+            println!(
+                "| {} | {} | {:.3} | {:.3} | {:.1}% | {:.1} | {} |",
+                method.name(),
+                if generated { "generated" } else { "imported" },
+                r.median,
+                r.p90,
+                r.over_one * 100.0,
+                r.mean_fetches,
+                r.max_fetches
+            );
+        }
+    }
+}
+
+/// The median time of `frames` frames of the demo scene at 960 x 540.
+fn frame_time(method: Method, pattern: Pattern, frames: usize) -> f64 {
+    let mut app = Headless::new(960, 540);
+    let opts = SceneOptions { method, pattern, ..Default::default() };
+    let target = RenderTarget::Image(app.target().into());
+    scene::spawn(app.world(), Some(target), &opts);
+    if let Some(h) = app.world().get_resource::<scene::SceneHandles>().and_then(|h| h.standard.clone())
+        && let Some(mut m) = app.world().resource_mut::<Assets<StandardMaterial>>().get_mut(&h)
+    {
+        m.max_parallax_layer_count = LAYERS;
+    }
+    app.frame(Duration::from_secs(600)).expect("the scene renders");
+    let mut times = Vec::with_capacity(frames);
+    for _ in 0..frames {
+        let t = Instant::now();
+        app.update();
+        times.push(t.elapsed().as_secs_f64() * 1000.0);
+    }
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+/// The quad of the accuracy probe: 2 x 2 in y = 0, u along +x, v along +z.
+fn quad(generated: bool) -> Mesh {
+    let p = [[-1.0f32, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]];
+    let uv: Vec<[f32; 2]> = p.iter().map(|q| [(q[0] + 1.0) / 2.0, (q[2] + 1.0) / 2.0]).collect();
+    let mut mesh = Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, p.to_vec())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; 4])
+        .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv)
+        .with_inserted_indices(Indices::U32(vec![0, 2, 1, 0, 3, 2]));
+    if generated {
+        mesh.generate_tangents().expect("the quad has normals and UVs");
+    } else {
+        mesh.insert_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, 1.0]; 4]);
+    }
+    mesh
+}
+
+/// A half-float image whose texel centres hold their own UV: sampled bilinearly at `uv`, it
+/// returns `uv` (away from the tile's edges).
+fn uv_image(n: u32) -> Image {
+    let mut data = Vec::with_capacity((n * n * 8) as usize);
+    for y in 0..n {
+        for x in 0..n {
+            let (u, v) = ((x as f32 + 0.5) / n as f32, (y as f32 + 0.5) / n as f32);
+            for c in [u, v, 0.0, 1.0] {
+                data.extend_from_slice(&pomkit_gpu::util::f32_to_f16(c).to_le_bytes());
+            }
+        }
+    }
+    let mut image = Image::new(
+        Extent3d { width: n, height: n, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        data,
+        TextureFormat::Rgba16Float,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
+        address_mode_u: ImageAddressMode::Repeat,
+        address_mode_v: ImageAddressMode::Repeat,
+        ..ImageSamplerDescriptor::linear()
+    });
+    image
+}
+
+struct Accuracy {
+    median: f32,
+    p90: f32,
+    over_one: f32,
+    mean_fetches: f32,
+    max_fetches: u32,
+}
+
+/// Renders the probe quad with `method` and compares each pixel's hit UV with pomkit-core's
+/// exact tracer.
+fn accuracy(method: Method, field: &HeightField, surface: &Surface, generated: bool) -> Accuracy {
+    let mut app = Headless::new(PW, PH);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(generated));
+    let camera_at = Transform::from_xyz(0.0, 1.2, 1.4).looking_at(Vec3::new(0.0, -0.2, -0.2), Vec3::Y);
+    let target = RenderTarget::Image(app.target().into());
+    let camera = app.world().spawn((Camera3d::default(), Hdr, Tonemapping::None, Msaa::Off, camera_at, target)).id();
+    let depth_map = app.world().resource_mut::<Assets<Image>>().add(scene::bevy_depth_map_of(field));
+    let uvs = app.world().resource_mut::<Assets<Image>>().add(uv_image(1024));
+    let mut fetch_frame = None;
+    match method {
+        Method::Bevy(m) => {
+            let material = app.world().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+                base_color_texture: Some(uvs),
+                unlit: true,
+                depth_map: Some(depth_map),
+                parallax_depth_scale: DEPTH_SCALE,
+                parallax_mapping_method: m,
+                max_parallax_layer_count: LAYERS,
+                ..default()
+            });
+            app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+        }
+        Method::Pomkit(t) => {
+            let heights = app.world().resource_mut::<Assets<Image>>().add(depth_image(field));
+            let mut ext = Pomkit::new(heights).with_technique(t).with_depth_scale(DEPTH_SCALE);
+            ext.map_kind = MapKind::Depth;
+            ext.lod_threshold = f32::MAX;
+            ext.debug = PomkitDebug::Fetches;
+            let material = app
+                .world()
+                .resource_mut::<Assets<PomkitMaterial>>()
+                .add(PomkitMaterial { base: default(), extension: ext });
+            app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
+            fetch_frame = Some(app.frame(Duration::from_secs(600)).expect("the probe renders"));
+            if let Some(mut m) = app.world().resource_mut::<Assets<PomkitMaterial>>().get_mut(&material) {
+                m.extension.debug = PomkitDebug::HitUv;
+            }
+        }
+    }
+    let frame = app.frame(Duration::from_secs(600)).expect("the probe renders");
+    let world = app.world();
+    let (cam, gt) = world.query::<(&Camera, &GlobalTransform)>().get(world, camera).expect("camera");
+    let n = MAP as f32;
+    let mut errors = Vec::new();
+    let mut fetches = Vec::new();
+    for y in 0..PH {
+        for x in 0..PW {
+            let Ok(ray) = cam.viewport_to_world(gt, Vec2::new(x as f32 + 0.5, y as f32 + 0.5)) else { continue };
+            let d = ray.direction.as_vec3();
+            if d.y >= -1e-4 {
+                continue;
+            }
+            let p = ray.origin + d * (-ray.origin.y / d.y);
+            let uv0 = Vec2::new((p.x + 1.0) / 2.0, (p.z + 1.0) / 2.0);
+            if uv0.min_element() < 0.02 || uv0.max_element() > 0.98 {
+                continue;
+            }
+            let dir = pomkit_core::glam::Vec3::new(d.x, d.z, d.y).normalize();
+            let start = pomkit_core::glam::Vec2::new(uv0.x, uv0.y);
+            let params = TraceParams { depth_scale: DEPTH_SCALE, ..TraceParams::default() };
+            let truth = trace(surface, &Ray::new(start, dir), Technique::Exact, &params).uv;
+            let got = pixel(&frame, x, y);
+            // Bevy's probe reads a repeating texture: compare within the tile, and skip hits
+            // within a texel of the tile's edge, where the UV texture's filter wraps.
+            let wrap = |a: f32| a - a.floor();
+            let (tu, tv) = (wrap(truth.x), wrap(truth.y));
+            let edge = 1.5 / 1024.0;
+            if tu.min(tv) < edge || tu.max(tv) > 1.0 - edge {
+                continue;
+            }
+            let du = (wrap(got.x) - tu).abs();
+            let dv = (wrap(got.y) - tv).abs();
+            let err = Vec2::new(du.min(1.0 - du), dv.min(1.0 - dv)).length() * n;
+            errors.push(err);
+            fetches.push(match (method, &fetch_frame) {
+                (Method::Pomkit(_), Some(f)) => (pixel4(f, x, y)[0] * 64.0).round() as u32,
+                (Method::Bevy(m), _) => bevy_fetches(field, uv0, Vec3::new(d.x, d.z, d.y), m, generated),
+                _ => 0,
+            });
+        }
+    }
+    errors.sort_by(f32::total_cmp);
+    let q = |p: f32| errors[((errors.len() - 1) as f32 * p) as usize];
+    Accuracy {
+        median: q(0.5),
+        p90: q(0.9),
+        over_one: errors.iter().filter(|&&e| e > 1.0).count() as f32 / errors.len() as f32,
+        mean_fetches: fetches.iter().sum::<u32>() as f32 / fetches.len().max(1) as f32,
+        max_fetches: fetches.iter().copied().max().unwrap_or(0),
+    }
+}
+
+fn pixel4(frame: &Frame, x: u32, y: u32) -> [f32; 4] {
+    frame.at(x, y)
+}
+
+fn pixel(frame: &Frame, x: u32, y: u32) -> Vec2 {
+    let p = frame.at(x, y);
+    Vec2::new(p[0], p[1])
+}
+
+/// Height reads Bevy's parallax loop makes for one ray (its shader, `parallaxed_uv`, replayed):
+/// one before the layer loop, one per layer stepped, then one for Occlusion's interpolation or
+/// `max_steps` for Relief's binary search. `dir` is the eye-to-point direction in (u, v, up)
+/// terms; with generated tangents Bevy's bitangent points down the image, so its steps go the
+/// other way in v (which changes the count, as it changes the hit).
+fn bevy_fetches(field: &HeightField, uv0: Vec2, dir: Vec3, method: ParallaxMappingMethod, generated: bool) -> u32 {
+    // Bevy's Vt is the point-to-eye vector in (T, B, N); it steps by -Vt.xy * (1, -1).
+    let to_eye = -dir.normalize();
+    let vt = Vec3::new(to_eye.x, if generated { to_eye.y } else { -to_eye.y }, to_eye.z);
+    let steepness = vt.z.abs();
+    let layers = LAYERS + (1.0 - LAYERS) * steepness;
+    let layer_depth = 1.0 / layers;
+    let delta = -vt.truncate() * Vec2::new(1.0, -1.0) * DEPTH_SCALE * layer_depth / steepness;
+    let sample = |uv: Vec2| field.sample_bilinear(pomkit_core::glam::Vec2::new(uv.x, uv.y), EdgeMode::Wrap);
+    let mut uv = uv0;
+    let mut current = 0.0;
+    let mut depth = sample(uv);
+    let mut reads = 1;
+    let mut i = 0;
+    while depth > current && i as f32 <= layers.floor() {
+        current += layer_depth;
+        uv += delta;
+        depth = sample(uv);
+        reads += 1;
+        i += 1;
+    }
+    reads
+        + match method {
+            ParallaxMappingMethod::Occlusion => 1,
+            ParallaxMappingMethod::Relief { max_steps } => max_steps,
+        }
+}

@@ -1,0 +1,299 @@
+//! Height resources from a Bevy [`Image`]: the textures pomkit's shader library reads, built on
+//! the CPU by pomkit-core (the same maps pomkit's GPU passes build, see ARCHITECTURE.md).
+//!
+//! - `heights`: `Rgba16Float` with a full mip chain; R = depth d in [0, 1] (0 the surface, 1 the
+//!   deepest point), G = the parallax value `clamp(n_z * d, 0, 1)` that the `parallax`
+//!   technique reads.
+//! - `pyramid`: `R32Float`, the maximum-height (minimum-depth) pyramid of the exact tracer,
+//!   padded to powers of two; mip `l` holds level `l` in its top-left corner.
+//! - `normals`: `Rgba16Float`, the tangent-space normal (x along +u, y up the image, z out of
+//!   the surface) baked at Lengyel's scale `depth_scale * width`.
+
+use bevy::asset::RenderAssetUsages;
+use bevy::image::{Image, ImageAddressMode, ImageFilterMode, ImageSampler, ImageSamplerDescriptor};
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+use pomkit_core::EdgeMode;
+use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals};
+use pomkit_core::heightfield::HeightField;
+use pomkit_core::trace::Surface;
+use pomkit_gpu::util::f32_to_f16;
+
+/// How the source image's values map to depth.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum MapKind {
+    /// White is high (a height map, as pomkit's command line reads them): depth = 1 - value.
+    #[default]
+    Height,
+    /// White is deep (a depth map, as `StandardMaterial::depth_map` expects): depth = value.
+    Depth,
+}
+
+/// Which channel of the source image holds the height.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Channel {
+    /// Red (the only channel of `R8Unorm`, `R16Unorm`, `R32Float` images).
+    R,
+    /// Green.
+    G,
+    /// Blue.
+    B,
+    /// Alpha.
+    A,
+    /// Rec. 709 luma of the stored values, `0.2126 R + 0.7152 G + 0.0722 B` (the default, as
+    /// pomkit's command line). For a single-channel image it is that channel.
+    #[default]
+    Luma,
+}
+
+/// Why a Bevy image cannot be read as a height map.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HeightImageError {
+    /// A texture format this crate cannot read heights from (compressed, depth, integer, ...).
+    #[error(
+        "its format {0:?} cannot be read as heights (use an 8- or 16-bit unorm or a float format: R8Unorm, Rgba8UnormSrgb, R16Unorm, R32Float, ...)"
+    )]
+    Format(TextureFormat),
+    /// Not a single 2D image.
+    #[error("it is not a single 2D image ({0})")]
+    Shape(String),
+    /// The image holds no pixel data on the CPU (it was created render-world only).
+    #[error(
+        "it has no pixel data in the main world (give it RenderAssetUsages::MAIN_WORLD so its heights can be read)"
+    )]
+    NoData,
+    /// `Channel::A` of an image without alpha.
+    #[error("it has no alpha channel to read heights from (use Channel::Luma, R, G or B)")]
+    NoAlpha,
+    /// A sample is not finite.
+    #[error("its texel ({x}, {y}) is {value}, not a finite number")]
+    NotFinite {
+        /// Column.
+        x: u32,
+        /// Row.
+        y: u32,
+        /// The value read.
+        value: f32,
+    },
+    /// The pixel data is shorter than the size says.
+    #[error("its pixel data holds {got} bytes, {want} expected for its size and format")]
+    DataSize {
+        /// Bytes present.
+        got: usize,
+        /// Bytes needed.
+        want: usize,
+    },
+}
+
+/// The texel layout of the formats heights are read from: channels, bytes per channel, and how a
+/// channel's bytes become a value.
+#[derive(Clone, Copy)]
+enum Sample {
+    Unorm8,
+    Unorm16,
+    Float16,
+    Float32,
+}
+
+fn layout(format: TextureFormat) -> Option<(usize, Sample)> {
+    use TextureFormat as F;
+    Some(match format {
+        F::R8Unorm => (1, Sample::Unorm8),
+        F::Rg8Unorm => (2, Sample::Unorm8),
+        F::Rgba8Unorm | F::Rgba8UnormSrgb | F::Bgra8Unorm | F::Bgra8UnormSrgb => (4, Sample::Unorm8),
+        F::R16Unorm => (1, Sample::Unorm16),
+        F::Rg16Unorm => (2, Sample::Unorm16),
+        F::Rgba16Unorm => (4, Sample::Unorm16),
+        F::R16Float => (1, Sample::Float16),
+        F::Rg16Float => (2, Sample::Float16),
+        F::Rgba16Float => (4, Sample::Float16),
+        F::R32Float => (1, Sample::Float32),
+        F::Rg32Float => (2, Sample::Float32),
+        F::Rgba32Float => (4, Sample::Float32),
+        _ => return None,
+    })
+}
+
+/// The depths of mip 0 of `image`: the stored values of `channel` (no sRGB decoding: a height
+/// map's bytes are data, even where Bevy's loader marked the image sRGB), turned into depth by
+/// `kind`. Float values are clamped to [0, 1].
+///
+/// # Errors
+/// [`HeightImageError`] naming what cannot be read.
+pub fn depths_from_image(image: &Image, kind: MapKind, channel: Channel) -> Result<HeightField, HeightImageError> {
+    let desc = &image.texture_descriptor;
+    let format = desc.format;
+    let (channels, sample) = layout(format).ok_or(HeightImageError::Format(format))?;
+    if desc.dimension != TextureDimension::D2 || desc.size.depth_or_array_layers != 1 {
+        return Err(HeightImageError::Shape(format!(
+            "{:?} with {} layers",
+            desc.dimension, desc.size.depth_or_array_layers
+        )));
+    }
+    let (w, h) = (desc.size.width, desc.size.height);
+    if w == 0 || h == 0 {
+        return Err(HeightImageError::Shape(format!("{w}x{h} texels")));
+    }
+    let data = image.data.as_deref().ok_or(HeightImageError::NoData)?;
+    let size = match sample {
+        Sample::Unorm8 => 1,
+        Sample::Unorm16 | Sample::Float16 => 2,
+        Sample::Float32 => 4,
+    };
+    let texel = channels * size;
+    let want = w as usize * h as usize * texel;
+    if data.len() < want {
+        return Err(HeightImageError::DataSize { got: data.len(), want });
+    }
+    let bgra = matches!(format, TextureFormat::Bgra8Unorm | TextureFormat::Bgra8UnormSrgb);
+    // Index of R, G, B, A within a texel, or None when the image lacks it.
+    let slot = |c: usize| -> Option<usize> {
+        let c = if bgra && c != 3 { 2 - c } else { c };
+        (c < channels).then_some(c)
+    };
+    if channel == Channel::A && !(channels == 4) {
+        return Err(HeightImageError::NoAlpha);
+    }
+    let read = |t: &[u8], c: usize| -> f32 {
+        let b = &t[c * size..(c + 1) * size];
+        match sample {
+            Sample::Unorm8 => f32::from(b[0]) / 255.0,
+            Sample::Unorm16 => f32::from(u16::from_le_bytes([b[0], b[1]])) / 65535.0,
+            Sample::Float16 => pomkit_gpu::util::f16_to_f32(u16::from_le_bytes([b[0], b[1]])),
+            Sample::Float32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        }
+    };
+    let mut depths = Vec::with_capacity(w as usize * h as usize);
+    for (k, t) in data[..want].chunks_exact(texel).enumerate() {
+        let value = match channel {
+            Channel::R => read(t, 0),
+            Channel::G => slot(1).map_or_else(|| read(t, 0), |c| read(t, c)),
+            Channel::B => slot(2).map_or_else(|| read(t, 0), |c| read(t, c)),
+            Channel::A => read(t, 3),
+            Channel::Luma => match (slot(1), slot(2)) {
+                (Some(g), Some(b)) => {
+                    0.2126 * read(t, slot(0).unwrap_or(0)) + 0.7152 * read(t, g) + 0.0722 * read(t, b)
+                }
+                _ => read(t, 0),
+            },
+        };
+        if !value.is_finite() {
+            let k = k as u32;
+            return Err(HeightImageError::NotFinite { x: k % w, y: k / w, value });
+        }
+        let v = value.clamp(0.0, 1.0);
+        depths.push(match kind {
+            MapKind::Height => 1.0 - v,
+            MapKind::Depth => v,
+        });
+    }
+    // Every value is finite and in [0, 1], so this cannot fail.
+    HeightField::from_depths(w, h, depths).map_err(|e| HeightImageError::Shape(e.to_string()))
+}
+
+/// The three textures of a height resource, as Bevy images.
+pub struct HeightImages {
+    /// Depth (R) and parallax value (G), all mips.
+    pub heights: Image,
+    /// Maximum-height pyramid.
+    pub pyramid: Image,
+    /// Tangent-space normals.
+    pub normals: Image,
+}
+
+/// Builds the textures of `field` for tracing with `edges` at `depth_scale` (UV units; the
+/// normals and the parallax values depend on it).
+#[must_use]
+pub fn height_images(field: &HeightField, edges: EdgeMode, depth_scale: f32) -> HeightImages {
+    let (w, h) = (field.width(), field.height());
+    let surface = Surface::new(field.clone(), edges, depth_scale);
+    let mips = surface.mips();
+    let parallax = surface.parallax_mips();
+    let mut bytes = Vec::new();
+    for k in 0..mips.len() {
+        let (d, g) = (mips.level(k), parallax.level(k));
+        for (&dv, &gv) in d.depths().iter().zip(g.depths()) {
+            for v in [dv, gv, 0.0, 0.0] {
+                bytes.extend_from_slice(&f32_to_f16(v).to_le_bytes());
+            }
+        }
+    }
+    let mut heights = image(w, h, mips.len() as u32, TextureFormat::Rgba16Float, bytes);
+    heights.sampler = ImageSampler::Descriptor(sampler(edges));
+
+    // The pyramid: power-of-two mips, level l in the top-left of mip l.
+    let pyr = surface.pyramid();
+    let (pw, ph) = (w.next_power_of_two(), h.next_power_of_two());
+    let mut bytes = Vec::new();
+    for l in 0..pyr.len() {
+        let (mw, mh) = ((pw >> l).max(1), (ph >> l).max(1));
+        let (lw, lh) = pyr.level_size(l);
+        for y in 0..mh {
+            for x in 0..mw {
+                let v = if x < lw && y < lh { pyr.min_depth(l, x, y) } else { 0.0 };
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    let mut pyramid = image(pw, ph, pyr.len() as u32, TextureFormat::R32Float, bytes);
+    pyramid.sampler = ImageSampler::nearest();
+
+    let opts = NormalBakeOptions { scale: depth_scale * w as f32, filter: NormalFilter::Central, edges, y_down: false };
+    let n = bake_normals(field, &opts).unwrap_or_else(|_| vec![pomkit_core::glam::Vec3::Z; field.depths().len()]);
+    let mut bytes = Vec::with_capacity(n.len() * 8);
+    for v in n {
+        for c in [v.x, v.y, v.z, 0.0] {
+            bytes.extend_from_slice(&f32_to_f16(c).to_le_bytes());
+        }
+    }
+    let mut normals = image(w, h, 1, TextureFormat::Rgba16Float, bytes);
+    normals.sampler = ImageSampler::Descriptor(sampler(edges));
+    HeightImages { heights, pyramid, normals }
+}
+
+fn image(w: u32, h: u32, mips: u32, format: TextureFormat, data: Vec<u8>) -> Image {
+    // `Image::new` checks the data against mip 0 alone; these hold every mip.
+    let mut image = Image::new_uninit(
+        Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        format,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.data = Some(data);
+    image.texture_descriptor.mip_level_count = mips;
+    image
+}
+
+/// The sampler the tracers need: bilinear within a mip and between mips, repeating where the
+/// edges wrap.
+fn sampler(edges: EdgeMode) -> ImageSamplerDescriptor {
+    let address = match edges {
+        EdgeMode::Wrap => ImageAddressMode::Repeat,
+        EdgeMode::Clamp => ImageAddressMode::ClampToEdge,
+    };
+    ImageSamplerDescriptor {
+        label: Some("pomkit heights".into()),
+        address_mode_u: address,
+        address_mode_v: address,
+        address_mode_w: address,
+        mag_filter: ImageFilterMode::Linear,
+        min_filter: ImageFilterMode::Linear,
+        mipmap_filter: ImageFilterMode::Linear,
+        ..Default::default()
+    }
+}
+
+/// A Bevy image of `field`'s depths (`R32Float`, white deep: use it with [`MapKind::Depth`]),
+/// kept in the main world only: the plugin reads it on the CPU and uploads the textures it
+/// builds. For height fields made in code, such as pomkit's procedural patterns.
+#[must_use]
+pub fn depth_image(field: &HeightField) -> Image {
+    let data: Vec<u8> = field.depths().iter().flat_map(|d| d.to_le_bytes()).collect();
+    let mut image = Image::new_uninit(
+        Extent3d { width: field.width(), height: field.height(), depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        TextureFormat::R32Float,
+        RenderAssetUsages::MAIN_WORLD,
+    );
+    image.data = Some(data);
+    image
+}

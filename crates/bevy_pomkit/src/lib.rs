@@ -1,0 +1,365 @@
+//! bevy_pomkit: pomkit's parallax techniques in Bevy.
+//!
+//! Add [`PomkitPlugin`], then draw meshes with a [`PomkitMaterial`]: Bevy's
+//! `StandardMaterial` extended with a height map and pomkit's tracing. Every texture of the
+//! standard material is sampled at the traced UV, so Bevy's PBR shading, lights, shadow maps,
+//! fog and post-processing apply to the displaced surface as to any other.
+//!
+//! ```no_run
+//! use bevy::prelude::*;
+//! use bevy_pomkit::{Pomkit, PomkitMaterial, PomkitPlugin, Technique};
+//!
+//! fn setup(
+//!     mut commands: Commands,
+//!     mut meshes: ResMut<Assets<Mesh>>,
+//!     mut materials: ResMut<Assets<PomkitMaterial>>,
+//!     asset_server: Res<AssetServer>,
+//! ) {
+//!     let mesh = Mesh::from(Plane3d::default().mesh().size(2.0, 2.0)).with_generated_tangents().unwrap();
+//!     commands.spawn((
+//!         Mesh3d(meshes.add(mesh)),
+//!         MeshMaterial3d(materials.add(PomkitMaterial {
+//!             base: StandardMaterial { base_color_texture: Some(asset_server.load("albedo.png")), ..default() },
+//!             extension: Pomkit::new(asset_server.load("height.png")).with_technique(Technique::Exact),
+//!         })),
+//!     ));
+//! }
+//! # fn main() { App::new().add_plugins((DefaultPlugins, PomkitPlugin)).add_systems(Startup, setup).run(); }
+//! ```
+//!
+//! What the extension adds to the standard material (docs/EMBEDDING.md has the whole story):
+//! - any pomkit technique (`pom`, `relief`, `exact`, ...), in the material's UV space after its
+//!   `uv_transform`;
+//! - self-shadowing from Bevy's directional lights (hard, soft or exact), applied to each
+//!   light's direct contribution only;
+//! - the LOD fade: the full technique up to a mip level of the height map, faded out over the
+//!   next;
+//! - pixel depth offset, in the main pass, the depth prepass and the shadow passes;
+//! - height maps from any Bevy `Image` of a readable format, rebuilt when the image changes;
+//! - a debug output of the hit UV, the fetch count, the LOD weight or the self-shadow.
+//!
+//! Tangent handedness: Bevy's `Mesh::generate_tangents` and authoring tools disagree on the
+//! sign of `w` (ARCHITECTURE.md, bevy_pomkit). The shader orients the bitangent by the
+//! screen-space UV derivatives, so both trace the same way.
+
+pub mod height;
+mod material;
+
+pub use height::{Channel, HeightImageError, MapKind};
+pub use material::{Pomkit, PomkitDebug, PomkitKey, PomkitUniform};
+pub use pomkit_core::EdgeMode;
+pub use pomkit_core::shadow::{ShadowMode, ShadowParams};
+pub use pomkit_core::trace::{Technique, TraceParams};
+
+use bevy::asset::{AssetEvent, AssetId, Assets, Handle, uuid_handle};
+use bevy::image::Image;
+use bevy::log::{error, warn};
+use bevy::mesh::{Mesh, Mesh3d};
+use bevy::pbr::{ExtendedMaterial, MaterialPlugin, MeshMaterial3d, StandardMaterial};
+use bevy::platform::collections::{HashMap, HashSet};
+use bevy::prelude::*;
+use bevy::shader::Shader;
+
+/// Bevy's `StandardMaterial` with pomkit's tracing.
+pub type PomkitMaterial = ExtendedMaterial<StandardMaterial, Pomkit>;
+
+/// pomkit's shader library as a Bevy import module, `pomkit::library`: every `pomkit_*`
+/// function, struct and constant of docs/EMBEDDING.md. A shader of your own can
+/// `#import pomkit::library::{pomkit_trace, PomkitParams}` once [`PomkitPlugin`] is added.
+pub const LIBRARY_SHADER: Handle<Shader> = uuid_handle!("6f2a4c55-3b0e-4a3e-9d0c-5b7e2f1c9a10");
+
+/// The material extension's shader (forward pass, prepass and shadow passes).
+pub const MATERIAL_SHADER: Handle<Shader> = uuid_handle!("0b8e41d2-7c4f-4f5b-a1c6-2e9d3f6a8b21");
+
+/// The import path of [`LIBRARY_SHADER`].
+pub const LIBRARY_IMPORT_PATH: &str = "pomkit::library";
+
+/// The library source as a Bevy shader module: pomkit's plain-WGSL library with an import path.
+///
+/// Bevy composes shader modules with naga_oil, which refuses identifiers that naga would rename
+/// when writing WGSL back, those ending in a digit (`uv0`, `t1`, `pad0`): each of the library's
+/// own such identifiers gets a trailing `_` here (`uv0_`). No function, struct or constant of
+/// the library's interface ends in a digit, so what your shader imports keeps its name.
+#[must_use]
+pub fn library_module_source() -> String {
+    format!("#define_import_path {LIBRARY_IMPORT_PATH}\n\n{}", naga_oil_safe(pomkit_gpu::library::WGSL))
+}
+
+/// WGSL built-in names that end in a digit (types and functions), left as they are.
+fn is_builtin(ident: &str) -> bool {
+    let vec_or_mat = |p: &str| {
+        ident.strip_prefix(p).is_some_and(|rest| {
+            let b = rest.as_bytes();
+            matches!(b, [b'2'..=b'4'] | [b'2'..=b'4', b'x', b'2'..=b'4'])
+        })
+    };
+    matches!(ident, "f16" | "f32" | "i32" | "u32" | "atan2" | "log2" | "exp2")
+        || vec_or_mat("vec")
+        || vec_or_mat("mat")
+        || (ident.starts_with("texture")
+            && (ident.ends_with("_1d") || ident.ends_with("_2d") || ident.ends_with("_3d")))
+}
+
+/// `source` with `_` appended to every identifier that ends in a digit, built-ins aside.
+fn naga_oil_safe(source: &str) -> String {
+    let mut out = String::with_capacity(source.len() + 256);
+    let mut chars = source.char_indices().peekable();
+    while let Some((start, c)) = chars.next() {
+        if c.is_ascii_alphabetic() || c == '_' {
+            let mut end = start + c.len_utf8();
+            while let Some(&(i, d)) = chars.peek() {
+                if d.is_ascii_alphanumeric() || d == '_' {
+                    end = i + d.len_utf8();
+                    chars.next();
+                } else {
+                    break;
+                }
+            }
+            let ident = &source[start..end];
+            out.push_str(ident);
+            if ident.ends_with(|d: char| d.is_ascii_digit()) && !is_builtin(ident) {
+                out.push('_');
+            }
+        } else if c.is_ascii_digit() {
+            // A number literal, suffixes and exponents included (`1e30`, `0x1Fu`, `2.5f`).
+            out.push(c);
+            while let Some(&(_, d)) = chars.peek() {
+                if d.is_ascii_alphanumeric() || d == '_' || d == '.' {
+                    out.push(d);
+                    chars.next();
+                } else {
+                    break;
+                }
+            }
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Adds [`PomkitMaterial`], the shader library module, and the systems that build height
+/// resources from the materials' height maps.
+#[derive(Default)]
+pub struct PomkitPlugin;
+
+impl Plugin for PomkitPlugin {
+    fn build(&self, app: &mut App) {
+        let mut shaders = app.world_mut().resource_mut::<Assets<Shader>>();
+        let library = Shader::from_wgsl(library_module_source(), "bevy_pomkit/pomkit_library.wgsl");
+        let material =
+            Shader::from_wgsl(include_str!("../shaders/pomkit_material.wgsl"), "bevy_pomkit/pomkit_material.wgsl");
+        for (id, shader) in [(LIBRARY_SHADER.id(), library), (MATERIAL_SHADER.id(), material)] {
+            if let Err(e) = shaders.insert(id, shader) {
+                error!("bevy_pomkit: could not register a shader: {e}");
+            }
+        }
+        app.add_plugins(MaterialPlugin::<PomkitMaterial>::default())
+            .init_resource::<HeightMaps>()
+            .add_systems(PostUpdate, (build_height_maps, check_meshes));
+    }
+}
+
+/// What was built for one material, so that a rebuild happens only when an input changed.
+#[derive(Clone, PartialEq)]
+struct Built {
+    source: AssetId<Image>,
+    kind: MapKind,
+    channel: Channel,
+    edges: EdgeMode,
+    depth_scale_bits: u32,
+}
+
+/// Height resources of the materials in use: what each was built from, and which inputs were
+/// reported bad (each reported once).
+#[derive(Resource, Default)]
+pub struct HeightMaps {
+    built: HashMap<AssetId<PomkitMaterial>, Built>,
+    reported: HashSet<String>,
+    derived: HashSet<AssetId<Image>>,
+}
+
+impl HeightMaps {
+    /// Whether `id` is a texture this plugin built (heights, pyramid or normals).
+    #[must_use]
+    pub fn is_derived(&self, id: AssetId<Image>) -> bool {
+        self.derived.contains(&id)
+    }
+
+    /// Whether the plugin has dealt with material `id`'s height map: built its textures, or
+    /// reported why it cannot (then the material draws as the plain standard material).
+    #[must_use]
+    pub fn settled(&self, id: AssetId<PomkitMaterial>) -> bool {
+        self.built.contains_key(&id)
+    }
+
+    /// Every bad input reported so far (each message also went to Bevy's log once).
+    #[must_use]
+    pub fn reports(&self) -> Vec<String> {
+        let mut r: Vec<String> = self.reported.iter().cloned().collect();
+        r.sort();
+        r
+    }
+
+    fn report(&mut self, message: String) {
+        if self.reported.insert(message.clone()) {
+            error!("{message}");
+        }
+    }
+}
+
+fn image_name(server: Option<&AssetServer>, id: AssetId<Image>) -> String {
+    server.and_then(|s| s.get_path(id)).map_or_else(|| format!("image {id}"), |p| format!("\"{p}\""))
+}
+
+/// Builds (or rebuilds) the height resources of every material whose height map, map kind,
+/// channel, edge mode or depth scale changed, and reports bad inputs in the log.
+fn build_height_maps(
+    mut materials: ResMut<Assets<PomkitMaterial>>,
+    mut images: ResMut<Assets<Image>>,
+    mut image_events: MessageReader<AssetEvent<Image>>,
+    mut maps: ResMut<HeightMaps>,
+    server: Option<Res<AssetServer>>,
+) {
+    let server = server.as_deref();
+    let mut changed: HashSet<AssetId<Image>> = HashSet::default();
+    for event in image_events.read() {
+        if let AssetEvent::Modified { id } | AssetEvent::LoadedWithDependencies { id } | AssetEvent::Added { id } =
+            event
+            && !maps.is_derived(*id)
+        {
+            changed.insert(*id);
+        }
+    }
+    let mut work = Vec::new();
+    for (id, m) in materials.iter() {
+        let e = &m.extension;
+        let want = Built {
+            source: e.height_map.id(),
+            kind: e.map_kind,
+            channel: e.channel,
+            edges: e.trace.edges,
+            depth_scale_bits: e.trace.depth_scale.to_bits(),
+        };
+        let stale = maps.built.get(&id) != Some(&want) || changed.contains(&want.source);
+        if stale {
+            work.push((id, want));
+        }
+    }
+    for (id, want) in work {
+        let name = image_name(server, want.source);
+        let Some(source) = images.get(want.source) else {
+            if let Some(s) = server
+                && let Some(bevy::asset::LoadState::Failed(err)) = s.get_load_state(want.source)
+            {
+                maps.report(format!(
+                    "bevy_pomkit: height map {name} failed to load ({err}): drawing the plain StandardMaterial"
+                ));
+                maps.built.insert(id, want);
+            }
+            continue;
+        };
+        let depth_scale = want_depth_scale(f32::from_bits(want.depth_scale_bits));
+        let built = height::depths_from_image(source, want.kind, want.channel)
+            .map(|field| height::height_images(&field, want.edges, depth_scale));
+        let Some(mut material) = materials.get_mut(id) else { continue };
+        let ext = &mut material.extension;
+        match built {
+            Ok(textures) => {
+                for (slot, image) in [
+                    (&mut ext.heights, textures.heights),
+                    (&mut ext.pyramid, textures.pyramid),
+                    (&mut ext.normal_texture, textures.normals),
+                ] {
+                    match slot {
+                        Some(handle) => {
+                            if let Err(e) = images.insert(handle.id(), image) {
+                                error!("bevy_pomkit: could not update a height texture: {e}");
+                            }
+                        }
+                        None => {
+                            let handle = images.add(image);
+                            maps.derived.insert(handle.id());
+                            *slot = Some(handle);
+                        }
+                    }
+                }
+            }
+            Err(e) => {
+                maps.report(format!("bevy_pomkit: height map {name}: {e}: drawing the plain StandardMaterial"));
+                ext.heights = None;
+                ext.pyramid = None;
+                ext.normal_texture = None;
+            }
+        }
+        maps.built.insert(id, want);
+    }
+    // Parameters the tracers refuse (a depth scale that is not finite and positive, ...).
+    for (id, m) in materials.iter() {
+        if let Err(e) = m.extension.params() {
+            maps.report(format!("bevy_pomkit: material {id}: {e}: drawing the plain StandardMaterial"));
+        }
+    }
+}
+
+/// The depth scale the maps are built with: a bad one is reported by `params` and the material
+/// drawn plain, so any positive stand-in will do here.
+fn want_depth_scale(s: f32) -> f32 {
+    if s.is_finite() && s > 0.0 { s } else { pomkit_core::trace::TraceParams::default().depth_scale }
+}
+
+/// Reports meshes drawn with a pomkit material that lack what tracing needs (UVs, normals and
+/// tangents); the shader draws them as the plain standard material.
+fn check_meshes(
+    query: Query<
+        (Entity, &Mesh3d),
+        (With<MeshMaterial3d<PomkitMaterial>>, Or<(Changed<Mesh3d>, Added<MeshMaterial3d<PomkitMaterial>>)>),
+    >,
+    meshes: Res<Assets<Mesh>>,
+    server: Option<Res<AssetServer>>,
+    mut maps: ResMut<HeightMaps>,
+) {
+    for (entity, mesh3d) in &query {
+        let Some(mesh) = meshes.get(&mesh3d.0) else { continue };
+        let missing: Vec<&str> = [
+            (Mesh::ATTRIBUTE_UV_0, "UV_0"),
+            (Mesh::ATTRIBUTE_NORMAL, "NORMAL"),
+            (Mesh::ATTRIBUTE_TANGENT, "TANGENT (call Mesh::generate_tangents or export tangents)"),
+        ]
+        .into_iter()
+        .filter(|(a, _)| !mesh.contains_attribute(a.id))
+        .map(|(_, n)| n)
+        .collect();
+        if !missing.is_empty() {
+            let name = server
+                .as_deref()
+                .and_then(|s| s.get_path(mesh3d.0.id()))
+                .map_or_else(|| format!("{} of entity {entity}", mesh3d.0.id()), |p| format!("\"{p}\""));
+            let message = format!(
+                "bevy_pomkit: mesh {name} has no {} attribute: drawing the plain StandardMaterial",
+                missing.join(", no ")
+            );
+            if maps.reported.insert(message.clone()) {
+                warn!("{message}");
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn library_identifiers_ending_in_digits_get_an_underscore() {
+        let src = "fn f(uv0: vec2<f32>, t1: f32) -> mat4x4<f32> { let x = atan2(t1, 1e30) + log2(2.5) + 0x1Fu; let t: texture_2d<f32>; return pad0; }";
+        let want = "fn f(uv0_: vec2<f32>, t1_: f32) -> mat4x4<f32> { let x = atan2(t1_, 1e30) + log2(2.5) + 0x1Fu; let t: texture_2d<f32>; return pad0_; }";
+        assert_eq!(naga_oil_safe(src), want);
+        // The library's interface keeps its names.
+        let module = library_module_source();
+        for name in ["fn pomkit_trace(", "struct PomkitParams", "fn pomkit_shadow(", "const POMKIT_EXACT:"] {
+            assert!(module.contains(name), "{name} renamed");
+        }
+        assert!(!module.contains(" uv0:") && module.contains(" uv0_:"));
+    }
+}

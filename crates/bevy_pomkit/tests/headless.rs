@@ -1,0 +1,476 @@
+//! bevy_pomkit rendered by Bevy with no window (lavapipe on CI), checked against independent
+//! answers: pomkit-core's CPU tracer for the same camera rays, the analytic intersection with a
+//! displaced plane, the sign of a lit bump's slopes, and the plain StandardMaterial.
+//!
+//! All tests share one lock: each builds a Bevy app with its own GPU device.
+
+#[path = "../examples/support/headless.rs"]
+mod headless;
+
+use std::sync::Mutex;
+use std::time::Duration;
+
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::Hdr;
+use bevy::camera::RenderTarget;
+use bevy::core_pipeline::prepass::DepthPrepass;
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::math::Affine2;
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::prelude::*;
+use bevy_pomkit::height::depth_image;
+use bevy_pomkit::{HeightMaps, MapKind, Pomkit, PomkitDebug, PomkitMaterial, Technique};
+use headless::{Frame, Headless};
+use pomkit_core::EdgeMode;
+use pomkit_core::heightfield::{HeightField, mip_level_from_gradients};
+use pomkit_core::procedural::{Pattern, generate};
+use pomkit_core::trace::{Ray, Surface, TraceParams, trace};
+
+static GPU: Mutex<()> = Mutex::new(());
+
+const W: u32 = 160;
+const H: u32 = 120;
+const TIMEOUT: Duration = Duration::from_secs(300);
+
+/// How the test quad's tangents are made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Tangents {
+    /// Written by hand in the glTF convention (B = w cross(N, T) points up the image), as an
+    /// authoring tool exports them: w = +1 here.
+    Imported,
+    /// The opposite handedness (w = -1, B down the image), as tangents from a generator that
+    /// takes glTF's v-down UVs for v-up ones have on real assets (docs/EMBEDDING.md).
+    Flipped,
+    /// Bevy's `Mesh::generate_tangents`.
+    Generated,
+}
+
+const ALL_TANGENTS: [Tangents; 3] = [Tangents::Imported, Tangents::Flipped, Tangents::Generated];
+
+/// A 2 x 2 quad in the y = 0 plane, normal +y, u along +x and v along +z (so up the image,
+/// -v, is -z), one UV unit per 2 world units.
+fn quad(tangents: Tangents) -> Mesh {
+    let p = [[-1.0f32, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]];
+    let uv: Vec<[f32; 2]> = p.iter().map(|q| [(q[0] + 1.0) / 2.0, (q[2] + 1.0) / 2.0]).collect();
+    let mut mesh = Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, p.to_vec())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; 4])
+        .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv)
+        .with_inserted_indices(Indices::U32(vec![0, 2, 1, 0, 3, 2]));
+    match tangents {
+        // cross(+y, +x) = -z: w = +1 points B up the image.
+        Tangents::Imported => mesh.insert_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, 1.0]; 4]),
+        Tangents::Flipped => mesh.insert_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, -1.0]; 4]),
+        Tangents::Generated => mesh.generate_tangents().expect("the quad has normals and UVs"),
+    }
+    mesh
+}
+
+fn tangent_w(mesh: &Mesh) -> f32 {
+    match mesh.attribute(Mesh::ATTRIBUTE_TANGENT) {
+        Some(bevy::mesh::VertexAttributeValues::Float32x4(t)) => t[0][3],
+        _ => panic!("no tangents"),
+    }
+}
+
+struct Setup {
+    field: HeightField,
+    technique: Technique,
+    depth_scale: f32,
+    tangents: Tangents,
+    debug: PomkitDebug,
+    uv_transform: Affine2,
+    camera: Transform,
+    prepass: bool,
+}
+
+impl Setup {
+    fn new(field: HeightField, technique: Technique) -> Self {
+        Self {
+            field,
+            technique,
+            depth_scale: 0.1,
+            tangents: Tangents::Imported,
+            debug: PomkitDebug::HitUv,
+            uv_transform: Affine2::IDENTITY,
+            camera: Transform::from_xyz(0.0, 1.3, 1.6).looking_at(Vec3::new(0.0, -0.1, 0.0), Vec3::Y),
+            prepass: false,
+        }
+    }
+}
+
+/// A raw (unlit, untonemapped, half-float) camera for debug outputs.
+fn spawn_camera(app: &mut Headless, transform: Transform, prepass: bool) -> Entity {
+    let target = RenderTarget::Image(app.target().into());
+    let mut e = app.world().spawn((Camera3d::default(), Hdr, Tonemapping::None, Msaa::Off, transform, target));
+    if prepass {
+        e.insert(DepthPrepass);
+    }
+    e.id()
+}
+
+fn pomkit_material(app: &mut Headless, s: &Setup, base: StandardMaterial) -> Handle<PomkitMaterial> {
+    let heights = app.world().resource_mut::<Assets<Image>>().add(depth_image(&s.field));
+    let mut ext = Pomkit::new(heights).with_technique(s.technique).with_depth_scale(s.depth_scale);
+    ext.map_kind = MapKind::Depth;
+    ext.debug = s.debug;
+    ext.lod_threshold = f32::MAX;
+    app.world()
+        .resource_mut::<Assets<PomkitMaterial>>()
+        .add(PomkitMaterial { base: StandardMaterial { uv_transform: s.uv_transform, ..base }, extension: ext })
+}
+
+/// Renders the quad with `s`; returns the frame and, for each pixel, the camera ray.
+fn render(s: &Setup) -> (Frame, Vec<Ray3d>) {
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(s.tangents));
+    let material = pomkit_material(&mut app, s, StandardMaterial::default());
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+    let camera = spawn_camera(&mut app, s.camera, s.prepass);
+    let frame = app.frame(TIMEOUT).expect("frame");
+    let rays = camera_rays(&mut app, camera);
+    (frame, rays)
+}
+
+fn camera_rays(app: &mut Headless, camera: Entity) -> Vec<Ray3d> {
+    let world = app.world();
+    let (cam, gt) = world.query::<(&Camera, &GlobalTransform)>().get(world, camera).expect("camera");
+    let mut rays = Vec::new();
+    for y in 0..H {
+        for x in 0..W {
+            let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            rays.push(cam.viewport_to_world(gt, p).expect("a ray through every pixel"));
+        }
+    }
+    rays
+}
+
+/// Where a world ray meets the plane y = `y`, if in front of the eye.
+fn hit_plane(ray: Ray3d, y: f32) -> Option<Vec3> {
+    let d = ray.direction.as_vec3();
+    if d.y.abs() < 1e-6 {
+        return None;
+    }
+    let t = (y - ray.origin.y) / d.y;
+    (t > 0.0).then(|| ray.origin + d * t)
+}
+
+/// The quad's UV at a world point of its plane (or a plane parallel to it).
+fn quad_uv(p: Vec3) -> Vec2 {
+    Vec2::new((p.x + 1.0) / 2.0, (p.z + 1.0) / 2.0)
+}
+
+/// The pixels whose entry point lies on the quad, `margin` UV units inside its edges.
+fn inside(rays: &[Ray3d], margin: f32) -> Vec<(usize, Vec2)> {
+    rays.iter()
+        .enumerate()
+        .filter_map(|(k, r)| {
+            let uv = quad_uv(hit_plane(*r, 0.0)?);
+            (uv.min_element() > margin && uv.max_element() < 1.0 - margin).then_some((k, uv))
+        })
+        .collect()
+}
+
+fn rg(frame: &Frame, k: usize) -> Vec2 {
+    let p = frame.pixels[k];
+    Vec2::new(p[0], p[1])
+}
+
+/// The CPU tracer's hit for the pixel `k` of the quad: the same ray in pomkit-core's ray terms
+/// (u along +x, v along +z, z up; 2 world units per UV unit on both axes, so the direction
+/// needs no stretch), at the mip level the pixel's UV footprint selects.
+fn cpu_hit(surface: &Surface, rays: &[Ray3d], k: usize, technique: Technique, depth_scale: f32) -> Option<Vec2> {
+    let ray = rays[k];
+    let uv0 = quad_uv(hit_plane(ray, 0.0)?);
+    let d = ray.direction.as_vec3();
+    let dir = Vec3::new(d.x, d.z, d.y).normalize();
+    let (x, y) = ((k as u32) % W, (k as u32) / W);
+    let neighbour = |dx: u32, dy: u32| -> Option<Vec2> {
+        let (nx, ny) = ((x + dx).min(W - 1), (y + dy).min(H - 1));
+        Some(quad_uv(hit_plane(rays[(ny * W + nx) as usize], 0.0)?))
+    };
+    let duv_dx = neighbour(1, 0)? - uv0;
+    let duv_dy = neighbour(0, 1)? - uv0;
+    let size = surface.field().size_f32();
+    let lod = mip_level_from_gradients(
+        pomkit_core::glam::Vec2::new(duv_dx.x, duv_dx.y),
+        pomkit_core::glam::Vec2::new(duv_dy.x, duv_dy.y),
+        size,
+        surface.mips().max_level(),
+    );
+    let params = TraceParams { depth_scale, lod, ..TraceParams::default() };
+    let hit = trace(
+        surface,
+        &Ray::new(pomkit_core::glam::Vec2::new(uv0.x, uv0.y), pomkit_core::glam::Vec3::new(dir.x, dir.y, dir.z)),
+        technique,
+        &params,
+    );
+    Some(Vec2::new(hit.uv.x, hit.uv.y))
+}
+
+/// Quantiles of the errors, in texels of a `size`-texel map.
+fn quantile(mut errors: Vec<f32>, q: f32) -> f32 {
+    errors.sort_by(f32::total_cmp);
+    errors[((errors.len() - 1) as f32 * q) as usize]
+}
+
+#[test]
+fn hit_uv_agrees_with_pomkit_core_for_the_same_rays() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let field = generate(Pattern::Pyramids, 64, 64);
+    let surface = Surface::new(field.clone(), EdgeMode::Wrap, 0.1);
+    for technique in [Technique::Exact, Technique::Pom, Technique::Relief] {
+        let s = Setup::new(field.clone(), technique);
+        let (frame, rays) = render(&s);
+        let pixels = inside(&rays, 0.02);
+        assert!(pixels.len() > (W * H / 3) as usize, "the quad covers too little of the frame: {}", pixels.len());
+        let errors: Vec<f32> = pixels
+            .iter()
+            .filter_map(|&(k, _)| Some((rg(&frame, k) - cpu_hit(&surface, &rays, k, technique, 0.1)?).length() * 64.0))
+            .collect();
+        let (median, p90) = (quantile(errors.clone(), 0.5), quantile(errors.clone(), 0.9));
+        let far = errors.iter().filter(|&&e| e > 1.0).count() as f32 / errors.len() as f32;
+        eprintln!(
+            "{}: {} pixels, median {median:.4} texel, p90 {p90:.4}, {:.2}% over 1 texel",
+            technique.name(),
+            errors.len(),
+            far * 100.0
+        );
+        // The same rays give the same hits: half-float output (~0.03 texel here) and the GPU's
+        // 2x2 derivatives against the CPU's one-pixel differences (pom and relief pick their mip
+        // level from them) are the only differences, except where a ray grazes an edge.
+        assert!(median < 0.1, "{}: median error {median} texels", technique.name());
+        assert!(far < 0.02, "{}: {:.2}% of pixels more than 1 texel off", technique.name(), far * 100.0);
+    }
+}
+
+#[test]
+fn offset_follows_the_displaced_plane_for_every_tangent_kind() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    // Both handednesses must trace the same way (the shader orients B by the UV derivatives).
+    assert_eq!(tangent_w(&quad(Tangents::Imported)), 1.0);
+    assert_eq!(tangent_w(&quad(Tangents::Flipped)), -1.0);
+    eprintln!("Bevy's generated tangents on the quad: w = {}", tangent_w(&quad(Tangents::Generated)));
+    // A field at depth 1 everywhere is the plane lowered by depth_scale UV units = 2 * 0.1
+    // world units: every technique's hit is where the eye ray meets that plane.
+    let field = HeightField::constant(32, 32, 1.0);
+    for tangents in ALL_TANGENTS {
+        for (uv_transform, name) in [
+            (Affine2::IDENTITY, "identity"),
+            (
+                Affine2::from_scale_angle_translation(
+                    Vec2::splat(2.0),
+                    std::f32::consts::FRAC_PI_2,
+                    Vec2::new(0.3, -0.2),
+                ),
+                "scaled, turned",
+            ),
+        ] {
+            let mut s = Setup::new(field.clone(), Technique::Pom);
+            s.tangents = tangents;
+            s.uv_transform = uv_transform;
+            let (frame, rays) = render(&s);
+            // depth_scale is in the material's (transformed) UV units: 2 world units per mesh
+            // UV unit over the transform's scale 2 gives 1 world unit per transformed unit.
+            let world_per_unit = 2.0 / uv_transform.matrix2.x_axis.length();
+            let lowered = -0.1 * world_per_unit;
+            let mut worst = 0.0f32;
+            let mut n = 0;
+            for (k, _) in inside(&rays, 0.02) {
+                let Some(p) = hit_plane(rays[k], lowered) else { continue };
+                let want = uv_transform.transform_point2(quad_uv(p));
+                worst = worst.max((rg(&frame, k) - want).length());
+                n += 1;
+            }
+            eprintln!("{tangents:?}, {name}: {n} pixels, worst {worst:.5} UV");
+            assert!(n > 1000);
+            assert!(worst < 2e-3, "{tangents:?}, {name}: hit {worst} UV from the displaced plane");
+        }
+    }
+}
+
+/// Mean brightness over the pixels whose entry UV lies within `r` of `centre`.
+fn mean_near(frame: &Frame, rays: &[Ray3d], centre: Vec2, r: f32) -> f32 {
+    let mut sum = 0.0;
+    let mut n = 0;
+    for (k, uv) in inside(rays, 0.0) {
+        if (uv - centre).length() < r {
+            let p = frame.pixels[k];
+            sum += p[0] + p[1] + p[2];
+            n += 1;
+        }
+    }
+    assert!(n > 10, "too few pixels near {centre}");
+    sum / n as f32
+}
+
+#[test]
+fn a_bump_is_brighter_on_the_side_of_the_light_for_every_tangent_kind() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    // A round bump in the middle of the map (white high).
+    let n = 64;
+    let field = HeightField::from_height_fn(n, n, |x, y| {
+        let (u, v) = ((x as f32 + 0.5) / n as f32 - 0.5, (y as f32 + 0.5) / n as f32 - 0.5);
+        (-(u * u + v * v) / (2.0 * 0.12f32.powi(2))).exp()
+    });
+    // Light from +x (+u), then from -z (up the image, -v): the slope facing it is brighter.
+    let cases = [(Vec3::new(1.0, 0.5, 0.0), Vec2::new(0.1, 0.0)), (Vec3::new(0.0, 0.5, -1.0), Vec2::new(0.0, -0.1))];
+    for tangents in ALL_TANGENTS {
+        for (to_light, side) in cases {
+            let mut s = Setup::new(field.clone(), Technique::Pom);
+            s.tangents = tangents;
+            s.debug = PomkitDebug::Off;
+            s.camera = Transform::from_xyz(0.0, 3.0, 0.0).looking_at(Vec3::ZERO, Vec3::NEG_Z);
+            let mut app = Headless::new(W, H);
+            let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(tangents));
+            let base = StandardMaterial { perceptual_roughness: 1.0, reflectance: 0.0, ..default() };
+            let material = pomkit_material(&mut app, &s, base);
+            app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+            app.world().spawn((
+                DirectionalLight { illuminance: 2000.0, shadow_maps_enabled: false, ..default() },
+                Transform::default().looking_to(-to_light, Vec3::Y),
+            ));
+            app.world().insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+            let camera = spawn_camera(&mut app, s.camera, false);
+            let frame = app.frame(TIMEOUT).expect("frame");
+            let rays = camera_rays(&mut app, camera);
+            let centre = Vec2::splat(0.5);
+            let lit = mean_near(&frame, &rays, centre + side, 0.03);
+            let away = mean_near(&frame, &rays, centre - side, 0.03);
+            eprintln!("{tangents:?}, light {to_light}: facing {lit:.4}, away {away:.4}");
+            assert!(
+                lit > away * 1.3,
+                "{tangents:?}, light {to_light}: the slope facing the light ({lit}) is not brighter than the other ({away})"
+            );
+        }
+    }
+}
+
+/// The POM quad over a constant-depth field (its traced floor 0.2 below the polygon) and a red
+/// plain square 0.1 below it: with pixel depth offset the square shows through.
+fn pdo_frame(pixel_depth: bool, prepass: bool) -> (Frame, Vec<Ray3d>) {
+    let mut s = Setup::new(HeightField::constant(16, 16, 1.0), Technique::Pom);
+    s.debug = PomkitDebug::Off;
+    s.prepass = prepass;
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let blue = StandardMaterial { base_color: Color::srgb(0.0, 0.0, 1.0), unlit: true, ..default() };
+    let material = pomkit_material(&mut app, &s, blue);
+    if let Some(mut m) = app.world().resource_mut::<Assets<PomkitMaterial>>().get_mut(&material) {
+        m.extension.pixel_depth_offset = pixel_depth;
+    }
+    app.world().spawn((Mesh3d(mesh.clone()), MeshMaterial3d(material)));
+    let red = app.world().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgb(1.0, 0.0, 0.0),
+        unlit: true,
+        ..default()
+    });
+    app.world().spawn((
+        Mesh3d(mesh),
+        MeshMaterial3d(red),
+        Transform::from_xyz(0.0, -0.1, 0.0).with_scale(Vec3::splat(0.4)),
+    ));
+    let camera = spawn_camera(&mut app, s.camera, prepass);
+    let frame = app.frame(TIMEOUT).expect("frame");
+    let rays = camera_rays(&mut app, camera);
+    (frame, rays)
+}
+
+#[test]
+fn pixel_depth_offset_shows_in_the_main_pass_and_the_depth_prepass() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    for prepass in [false, true] {
+        for pixel_depth in [false, true] {
+            let (frame, rays) = pdo_frame(pixel_depth, prepass);
+            // Pixels whose ray meets the red square's plane well inside it.
+            let mut red = 0;
+            let mut n = 0;
+            for (k, r) in rays.iter().enumerate() {
+                let Some(p) = hit_plane(*r, -0.1) else { continue };
+                if p.x.abs() < 0.3 && p.z.abs() < 0.3 {
+                    n += 1;
+                    let c = frame.pixels[k];
+                    if c[0] > 0.5 && c[2] < 0.5 {
+                        red += 1;
+                    }
+                }
+            }
+            eprintln!("prepass {prepass}, pixel depth {pixel_depth}: {red} of {n} red");
+            assert!(n > 500);
+            if pixel_depth {
+                assert!(
+                    red as f32 > 0.99 * n as f32,
+                    "prepass {prepass}: the square should show through the traced floor"
+                );
+            } else {
+                assert_eq!(red, 0, "prepass {prepass}: the polygon should hide the square");
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_draw_the_plain_material_and_say_why() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let lit_scene = |app: &mut Headless| {
+        app.world().spawn((
+            DirectionalLight { illuminance: 3000.0, shadow_maps_enabled: false, ..default() },
+            Transform::default().looking_to(Vec3::new(-1.0, -1.0, -0.5), Vec3::Y),
+        ));
+        spawn_camera(app, Setup::new(HeightField::constant(2, 2, 0.0), Technique::Pom).camera, false);
+    };
+    let base = StandardMaterial { base_color: Color::srgb(0.8, 0.6, 0.3), ..default() };
+    // The reference: the plain standard material.
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let plain = app.world().resource_mut::<Assets<StandardMaterial>>().add(base.clone());
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(plain)));
+    lit_scene(&mut app);
+    let reference = app.frame(TIMEOUT).expect("frame");
+
+    let field = generate(Pattern::Bricks, 32, 32);
+    // An integer image, a NaN depth scale, and a mesh without tangents.
+    let integer = Image::new_fill(
+        bevy::render::render_resource::Extent3d { width: 4, height: 4, depth_or_array_layers: 1 },
+        bevy::render::render_resource::TextureDimension::D2,
+        &[7, 0, 0, 0],
+        bevy::render::render_resource::TextureFormat::Rgba8Uint,
+        RenderAssetUsages::MAIN_WORLD,
+    );
+    for case in ["format", "depth scale", "tangents"] {
+        let mut app = Headless::new(W, H);
+        let mut mesh = quad(Tangents::Imported);
+        if case == "tangents" {
+            mesh.remove_attribute(Mesh::ATTRIBUTE_TANGENT);
+        }
+        let mesh = app.world().resource_mut::<Assets<Mesh>>().add(mesh);
+        let image = if case == "format" { integer.clone() } else { depth_image(&field) };
+        let heights = app.world().resource_mut::<Assets<Image>>().add(image);
+        let mut ext = Pomkit::new(heights);
+        if case == "depth scale" {
+            ext.trace.depth_scale = f32::NAN;
+        }
+        let material = app
+            .world()
+            .resource_mut::<Assets<PomkitMaterial>>()
+            .add(PomkitMaterial { base: base.clone(), extension: ext });
+        app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+        lit_scene(&mut app);
+        let frame = app.frame(TIMEOUT).expect("frame");
+        let worst = frame
+            .pixels
+            .iter()
+            .zip(&reference.pixels)
+            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max))
+            .fold(0.0, f32::max);
+        let reports = app.world().resource::<HeightMaps>().reports();
+        eprintln!("{case}: worst difference from the plain material {worst}; reports {reports:?}");
+        assert!(worst < 2e-3, "{case}: not the plain material's look (difference {worst})");
+        let expect = match case {
+            "format" => "Rgba8Uint",
+            "depth scale" => "depth_scale is NaN",
+            _ => "no TANGENT",
+        };
+        assert!(reports.iter().any(|r| r.contains(expect)), "{case}: no report naming the problem in {reports:?}");
+    }
+}
