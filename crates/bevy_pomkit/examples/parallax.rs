@@ -7,7 +7,8 @@
 //!
 //! Keys: T / Shift+T next / previous technique, S self-shadow mode, L LOD fade threshold,
 //! P pixel depth offset, D debug view, B Bevy's own parallax mapping (Occlusion, Relief) for
-//! comparison, R rotate the cube, Up / Down depth scale. The frame time is on screen.
+//! comparison, R rotate the cube, Up / Down depth scale. The window's title shows the settings
+//! and the frame time (Bevy's UI text would more than double the build of this crate's tests).
 
 #[path = "support/scene.rs"]
 mod scene;
@@ -55,9 +56,6 @@ struct BevyMaterials {
     standard: Handle<StandardMaterial>,
 }
 
-#[derive(Component)]
-struct Overlay;
-
 fn setup(world: &mut World) {
     let opts = SceneOptions::default();
     scene::spawn(world, None, &opts);
@@ -75,12 +73,10 @@ fn setup(world: &mut World) {
         ..default()
     });
     world.insert_resource(BevyMaterials { standard });
-    world.spawn((
-        Text::new(""),
-        TextFont { font_size: FontSize::Px(15.0), ..default() },
-        Node { position_type: PositionType::Absolute, top: px(10.0), left: px(10.0), ..default() },
-        Overlay,
-    ));
+    println!(
+        "keys: T / Shift+T technique, S self-shadow, L LOD fade, P pixel depth offset, D debug view, \
+         B Bevy's own parallax on the cube, R rotate, Up / Down depth scale"
+    );
 }
 
 #[expect(clippy::too_many_arguments, reason = "one system reads every key")]
@@ -188,32 +184,36 @@ fn rotate(time: Res<Time>, state: Res<State>, handles: Res<SceneHandles>, mut tr
     }
 }
 
+/// The settings and the frame time, in the window's title.
 fn overlay(
     diagnostics: Res<DiagnosticsStore>,
     state: Res<State>,
     handles: Res<SceneHandles>,
     pomkit: Res<Assets<PomkitMaterial>>,
-    mut text: Query<&mut Text, With<Overlay>>,
+    mut windows: Query<&mut Window>,
 ) {
-    let Ok(mut text) = text.single_mut() else { return };
+    let Ok(mut window) = windows.single_mut() else { return };
     let frame_ms = diagnostics
         .get(&FrameTimeDiagnosticsPlugin::FRAME_TIME)
         .and_then(|d| d.smoothed())
-        .map_or_else(|| "-".to_owned(), |ms| format!("{ms:.2} ms"));
+        .map_or_else(|| "-".to_owned(), |ms| format!("{ms:.1} ms"));
     let Some(m) = handles.pomkit.as_ref().and_then(|h| pomkit.get(h)) else { return };
     let e = &m.extension;
     let cube = match state.bevy {
-        None => "pomkit (floor and cube)".to_owned(),
-        Some(ParallaxMappingMethod::Occlusion) => "Bevy's Occlusion on the cube, pomkit on the floor".to_owned(),
-        Some(_) => "Bevy's Relief on the cube, pomkit on the floor".to_owned(),
+        None => String::new(),
+        Some(ParallaxMappingMethod::Occlusion) => " | cube: Bevy Occlusion".to_owned(),
+        Some(_) => " | cube: Bevy Relief".to_owned(),
     };
     let lod = if e.lod_threshold >= f32::MAX { "off".to_owned() } else { format!("mip {}", e.lod_threshold) };
-    **text = format!(
-        "frame {frame_ms}\n[T] technique: {}\n[S] self-shadow: {}\n[L] LOD fade: {lod}\n[P] pixel depth offset: {}\n[D] debug: {:?}\n[B] {cube}\n[Up/Down] depth scale: {:.3}\n[R] rotate",
+    let title = format!(
+        "{frame_ms} | [T] {} | [S] shadow {} | [L] LOD {lod} | [P] depth offset {} | [D] {:?} | depth {:.3}{cube}",
         e.technique.name(),
         e.shadow.mode.name(),
         if e.pixel_depth_offset { "on" } else { "off" },
         e.debug,
         e.trace.depth_scale,
     );
+    if window.title != title {
+        window.title = title;
+    }
 }

@@ -474,3 +474,88 @@ fn bad_inputs_draw_the_plain_material_and_say_why() {
         assert!(reports.iter().any(|r| r.contains(expect)), "{case}: no report naming the problem in {reports:?}");
     }
 }
+
+#[test]
+fn a_height_map_that_changes_is_rebuilt() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let s = Setup::new(HeightField::constant(16, 16, 1.0), Technique::Pom);
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let material = pomkit_material(&mut app, &s, StandardMaterial::default());
+    let heights = app.world().resource::<Assets<PomkitMaterial>>().get(&material).expect("material").extension.height_map.clone();
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+    let camera = spawn_camera(&mut app, s.camera, false);
+    let before = app.frame(TIMEOUT).expect("frame");
+    let rays = camera_rays(&mut app, camera);
+    let pixels = inside(&rays, 0.05);
+    // Deepest everywhere: the hits lie on the plane 0.2 below.
+    let off_plane = |frame: &Frame, y: f32, transform: bool| {
+        pixels
+            .iter()
+            .filter_map(|&(k, uv)| {
+                let want = if transform { quad_uv(hit_plane(rays[k], y)?) } else { uv };
+                Some((rg(frame, k) - want).length())
+            })
+            .fold(0.0f32, f32::max)
+    };
+    assert!(off_plane(&before, -0.2, true) < 2e-3);
+    // The map changes to the surface itself: every hit is its entry point.
+    *app.world().resource_mut::<Assets<Image>>().get_mut(&heights).expect("height map") =
+        depth_image(&HeightField::constant(16, 16, 0.0));
+    let mut worst = f32::MAX;
+    for _ in 0..5 {
+        let after = app.frame(TIMEOUT).expect("frame");
+        worst = off_plane(&after, 0.0, false);
+        if worst < 2e-3 {
+            break;
+        }
+    }
+    assert!(worst < 2e-3, "after the change, hits are {worst} UV from their entry points");
+}
+
+#[test]
+fn shadow_maps_see_the_traced_depth() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    // The POM quad's traced floor lies 0.2 below it, under a lit white floor 0.1 below it; the
+    // sun is straight above. With pixel depth offset the camera sees the white floor through
+    // the quad, and the shadow map, traced too, puts the quad's surface below that floor: it
+    // is lit as the floor outside the quad. A shadow map of the polygon would darken it.
+    let s = Setup::new(HeightField::constant(16, 16, 1.0), Technique::Pom);
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let mut setup = s;
+    setup.debug = PomkitDebug::Off;
+    let material = pomkit_material(&mut app, &setup, StandardMaterial { base_color: Color::BLACK, ..default() });
+    app.world().spawn((Mesh3d(mesh.clone()), MeshMaterial3d(material)));
+    let white = app
+        .world()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial { perceptual_roughness: 1.0, reflectance: 0.0, ..default() });
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(white), Transform::from_xyz(0.0, -0.1, 0.0).with_scale(Vec3::splat(3.0))));
+    app.world().spawn((
+        DirectionalLight { illuminance: 3000.0, shadow_maps_enabled: true, ..default() },
+        Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z),
+    ));
+    app.world().insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    let camera = spawn_camera(&mut app, setup.camera, false);
+    let frame = app.frame(TIMEOUT).expect("frame");
+    let rays = camera_rays(&mut app, camera);
+    let (mut under, mut outside) = (Vec::new(), Vec::new());
+    for (k, r) in rays.iter().enumerate() {
+        let Some(p) = hit_plane(*r, -0.1) else { continue };
+        let Some(q) = hit_plane(*r, 0.0) else { continue };
+        let c = frame.pixels[k];
+        let lum = c[0] + c[1] + c[2];
+        if q.x.abs() < 0.8 && q.z.abs() < 0.8 && p.x.abs() < 0.8 && p.z.abs() < 0.8 {
+            under.push(lum);
+        } else if (q.x.abs() > 1.1 || q.z.abs() > 1.1) && p.x.abs() < 2.5 && p.z.abs() < 2.5 {
+            outside.push(lum);
+        }
+    }
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len().max(1) as f32;
+    let (u, o) = (mean(&under), mean(&outside));
+    eprintln!("floor under the quad {u:.4} ({} px), outside {o:.4} ({} px)", under.len(), outside.len());
+    assert!(under.len() > 500 && outside.len() > 500);
+    assert!(o > 0.1, "the floor outside the quad is not lit");
+    assert!((u - o).abs() < 0.05 * o, "the floor seen through the quad is {u}, the floor outside {o}: the shadow map holds the polygon's depth");
+}
