@@ -19,7 +19,7 @@ use bevy::math::Affine2;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy_pomkit::height::depth_image;
-use bevy_pomkit::{HeightMaps, MapKind, Pomkit, PomkitDebug, PomkitMaterial, Technique};
+use bevy_pomkit::{HeightMaps, MapKind, Pomkit, PomkitDebug, PomkitMaterial, ShadowMode, ShadowParams, Technique};
 use headless::{Frame, Headless};
 use pomkit_core::EdgeMode;
 use pomkit_core::heightfield::{HeightField, mip_level_from_gradients};
@@ -482,7 +482,8 @@ fn a_height_map_that_changes_is_rebuilt() {
     let mut app = Headless::new(W, H);
     let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
     let material = pomkit_material(&mut app, &s, StandardMaterial::default());
-    let heights = app.world().resource::<Assets<PomkitMaterial>>().get(&material).expect("material").extension.height_map.clone();
+    let heights =
+        app.world().resource::<Assets<PomkitMaterial>>().get(&material).expect("material").extension.height_map.clone();
     app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
     let camera = spawn_camera(&mut app, s.camera, false);
     let before = app.frame(TIMEOUT).expect("frame");
@@ -527,11 +528,16 @@ fn shadow_maps_see_the_traced_depth() {
     setup.debug = PomkitDebug::Off;
     let material = pomkit_material(&mut app, &setup, StandardMaterial { base_color: Color::BLACK, ..default() });
     app.world().spawn((Mesh3d(mesh.clone()), MeshMaterial3d(material)));
-    let white = app
-        .world()
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(StandardMaterial { perceptual_roughness: 1.0, reflectance: 0.0, ..default() });
-    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(white), Transform::from_xyz(0.0, -0.1, 0.0).with_scale(Vec3::splat(3.0))));
+    let white = app.world().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        perceptual_roughness: 1.0,
+        reflectance: 0.0,
+        ..default()
+    });
+    app.world().spawn((
+        Mesh3d(mesh),
+        MeshMaterial3d(white),
+        Transform::from_xyz(0.0, -0.1, 0.0).with_scale(Vec3::splat(3.0)),
+    ));
     app.world().spawn((
         DirectionalLight { illuminance: 3000.0, shadow_maps_enabled: true, ..default() },
         Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z),
@@ -557,5 +563,109 @@ fn shadow_maps_see_the_traced_depth() {
     eprintln!("floor under the quad {u:.4} ({} px), outside {o:.4} ({} px)", under.len(), outside.len());
     assert!(under.len() > 500 && outside.len() > 500);
     assert!(o > 0.1, "the floor outside the quad is not lit");
-    assert!((u - o).abs() < 0.05 * o, "the floor seen through the quad is {u}, the floor outside {o}: the shadow map holds the polygon's depth");
+    assert!(
+        (u - o).abs() < 0.05 * o,
+        "the floor seen through the quad is {u}, the floor outside {o}: the shadow map holds the polygon's depth"
+    );
+}
+
+#[test]
+fn self_shadows_agree_with_pomkit_core() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let field = generate(Pattern::Pyramids, 64, 64);
+    let surface = Surface::new(field.clone(), EdgeMode::Wrap, 0.1);
+    // The sun 30 degrees above the horizon, from +x and a little -z.
+    let to_light = Vec3::new(1.0, 0.62, -0.3).normalize();
+    for mode in [ShadowMode::Hard, ShadowMode::Exact] {
+        let mut s = Setup::new(field.clone(), Technique::Exact);
+        s.debug = PomkitDebug::Shadow;
+        let mut app = Headless::new(W, H);
+        let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+        let material = pomkit_material(&mut app, &s, StandardMaterial::default());
+        if let Some(mut m) = app.world().resource_mut::<Assets<PomkitMaterial>>().get_mut(&material) {
+            m.extension.shadow.mode = mode;
+        }
+        app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+        app.world().spawn((
+            DirectionalLight { illuminance: 1000.0, shadow_maps_enabled: false, ..default() },
+            Transform::default().looking_to(-to_light, Vec3::Y),
+        ));
+        let camera = spawn_camera(&mut app, s.camera, false);
+        let frame = app.frame(TIMEOUT).expect("frame");
+        let rays = camera_rays(&mut app, camera);
+        // pomkit-core for the same rays: the exact hit, then its shadow toward the same light
+        // in ray terms (u along +x, v along +z, up).
+        let light = pomkit_core::glam::Vec3::new(to_light.x, to_light.z, to_light.y);
+        let params = TraceParams { depth_scale: 0.1, ..TraceParams::default() };
+        let (mut n, mut differ, mut shadowed) = (0, 0, 0);
+        for (k, _) in inside(&rays, 0.02) {
+            let d = rays[k].direction.as_vec3();
+            let uv0 = quad_uv(hit_plane(rays[k], 0.0).expect("inside"));
+            let ray = Ray::new(
+                pomkit_core::glam::Vec2::new(uv0.x, uv0.y),
+                pomkit_core::glam::Vec3::new(d.x, d.z, d.y).normalize(),
+            );
+            let hit = trace(&surface, &ray, Technique::Exact, &params);
+            let want =
+                pomkit_core::shadow(&surface, hit.uv, hit.depth, light, &ShadowParams { mode, softness: 0.1 }, &params)
+                    .visibility;
+            let got = frame.pixels[k][0];
+            n += 1;
+            shadowed += usize::from(want < 0.5);
+            differ += usize::from((got - want).abs() > 0.5);
+        }
+        let share = differ as f32 / n as f32;
+        eprintln!("{}: {n} pixels, {shadowed} shadowed by pomkit-core, {:.2}% disagree", mode.name(), share * 100.0);
+        assert!(shadowed > n / 10, "{}: the test light casts too little shadow ({shadowed} of {n})", mode.name());
+        // Only where a shadow edge passes within a hair of the hit (f32 against f64, half-float
+        // hit UVs) may the two differ.
+        assert!(share < 0.03, "{}: {:.2}% of pixels disagree with pomkit-core", mode.name(), share * 100.0);
+    }
+}
+
+#[test]
+fn the_lod_fade_follows_the_height_map_mip_level() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    // A grazing view over a fine map: mip levels from 0 near the camera to over 3 at the back.
+    let field = generate(Pattern::Bricks, 256, 256);
+    let mut s = Setup::new(field, Technique::Pom);
+    s.debug = PomkitDebug::Fetches;
+    s.camera = Transform::from_xyz(0.0, 0.35, 1.3).looking_at(Vec3::new(0.0, 0.0, -0.6), Vec3::Y);
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let material = pomkit_material(&mut app, &s, StandardMaterial::default());
+    let threshold = 2.0;
+    if let Some(mut m) = app.world().resource_mut::<Assets<PomkitMaterial>>().get_mut(&material) {
+        m.extension.lod_threshold = threshold;
+    }
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+    let camera = spawn_camera(&mut app, s.camera, false);
+    let frame = app.frame(TIMEOUT).expect("frame");
+    let rays = camera_rays(&mut app, camera);
+    let mut errors = Vec::new();
+    let (mut full, mut none) = (0, 0);
+    for (k, uv0) in inside(&rays, 0.02) {
+        let (x, y) = ((k as u32) % W, (k as u32) / W);
+        if x + 1 >= W || y + 1 >= H {
+            continue;
+        }
+        let at = |k: usize| hit_plane(rays[k], 0.0).map(quad_uv);
+        let (Some(right), Some(below)) = (at(k + 1), at(k + W as usize)) else { continue };
+        let level = mip_level_from_gradients(
+            pomkit_core::glam::Vec2::new(right.x - uv0.x, right.y - uv0.y),
+            pomkit_core::glam::Vec2::new(below.x - uv0.x, below.y - uv0.y),
+            pomkit_core::glam::Vec2::splat(256.0),
+            8.0,
+        );
+        let want = (threshold - level).clamp(0.0, 1.0);
+        let got = frame.pixels[k][1];
+        full += usize::from(want >= 1.0);
+        none += usize::from(want <= 0.0);
+        errors.push((got - want).abs());
+    }
+    let (median, p95) = (quantile(errors.clone(), 0.5), quantile(errors.clone(), 0.95));
+    eprintln!("{} pixels ({full} full, {none} faded out): weight error median {median:.4}, p95 {p95:.4}", errors.len());
+    assert!(full > 100 && none > 100, "the view does not span the fade ({full} full, {none} out)");
+    // The GPU takes one derivative per 2x2 quad, the test one pixel's differences.
+    assert!(median < 0.02 && p95 < 0.25, "LOD weight off: median {median}, p95 {p95}");
 }
