@@ -64,8 +64,8 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<(), String> {
     let method = scene::Method::parse(&args.technique)?;
-    let shadow = args.shadow.parse().map_err(|e| format!("{e}"))?;
-    let pattern: Pattern = args.pattern.parse().map_err(|e| format!("{e}"))?;
+    let shadow: bevy_pomkit::ShadowMode = args.shadow.parse().map_err(|e| format!("--shadow: {e}"))?;
+    let pattern: Pattern = args.pattern.parse().map_err(|e| format!("--pattern: {e}"))?;
     if !(args.depth_scale.is_finite() && args.depth_scale > 0.0) {
         return Err(format!("--depth-scale {}: it must be a finite number above 0", args.depth_scale));
     }

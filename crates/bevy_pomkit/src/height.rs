@@ -150,7 +150,7 @@ pub fn depths_from_image(image: &Image, kind: MapKind, channel: Channel) -> Resu
         let c = if bgra && c != 3 { 2 - c } else { c };
         (c < channels).then_some(c)
     };
-    if channel == Channel::A && !(channels == 4) {
+    if channel == Channel::A && channels != 4 {
         return Err(HeightImageError::NoAlpha);
     }
     let read = |t: &[u8], c: usize| -> f32 {

@@ -161,7 +161,7 @@ impl Plugin for PomkitPlugin {
 }
 
 /// What was built for one material, so that a rebuild happens only when an input changed.
-#[derive(Clone, PartialEq)]
+#[derive(Clone, PartialEq, Eq, Hash)]
 struct Built {
     source: AssetId<Image>,
     kind: MapKind,
@@ -175,8 +175,17 @@ struct Built {
 #[derive(Resource, Default)]
 pub struct HeightMaps {
     built: HashMap<AssetId<PomkitMaterial>, Built>,
+    cache: HashMap<Built, Textures>,
     reported: HashSet<String>,
     derived: HashSet<AssetId<Image>>,
+}
+
+/// The textures of one height map at one set of settings.
+#[derive(Clone)]
+struct Textures {
+    heights: Handle<Image>,
+    pyramid: Handle<Image>,
+    normals: Handle<Image>,
 }
 
 impl HeightMaps {
@@ -199,6 +208,40 @@ impl HeightMaps {
         let mut r: Vec<String> = self.reported.iter().cloned().collect();
         r.sort();
         r
+    }
+
+    /// Puts `built` into the images of `cached` (a source that changed), or into new images.
+    fn store(
+        &mut self,
+        images: &mut Assets<Image>,
+        key: &Built,
+        cached: Option<Textures>,
+        built: height::HeightImages,
+    ) -> Textures {
+        match cached {
+            Some(t) => {
+                for (handle, image) in
+                    [(&t.heights, built.heights), (&t.pyramid, built.pyramid), (&t.normals, built.normals)]
+                {
+                    if let Err(e) = images.insert(handle.id(), image) {
+                        error!("bevy_pomkit: could not update a height texture: {e}");
+                    }
+                }
+                t
+            }
+            None => {
+                let t = Textures {
+                    heights: images.add(built.heights),
+                    pyramid: images.add(built.pyramid),
+                    normals: images.add(built.normals),
+                };
+                for h in [&t.heights, &t.pyramid, &t.normals] {
+                    self.derived.insert(h.id());
+                }
+                self.cache.insert(key.clone(), t.clone());
+                t
+            }
+        }
     }
 
     fn report(&mut self, message: String) {
@@ -246,47 +289,54 @@ fn build_height_maps(
             work.push((id, want));
         }
     }
+    // Materials with the same height map and settings share one set of textures; a changed
+    // source is rebuilt once, in place, for all of them.
+    let mut done: HashMap<Built, Result<Textures, String>> = HashMap::default();
     for (id, want) in work {
         let name = image_name(server, want.source);
-        let Some(source) = images.get(want.source) else {
-            if let Some(s) = server
-                && let Some(bevy::asset::LoadState::Failed(err)) = s.get_load_state(want.source)
-            {
-                maps.report(format!(
-                    "bevy_pomkit: height map {name} failed to load ({err}): drawing the plain StandardMaterial"
-                ));
-                maps.built.insert(id, want);
-            }
-            continue;
-        };
-        let depth_scale = want_depth_scale(f32::from_bits(want.depth_scale_bits));
-        let built = height::depths_from_image(source, want.kind, want.channel)
-            .map(|field| height::height_images(&field, want.edges, depth_scale));
-        let Some(mut material) = materials.get_mut(id) else { continue };
-        let ext = &mut material.extension;
-        match built {
-            Ok(textures) => {
-                for (slot, image) in [
-                    (&mut ext.heights, textures.heights),
-                    (&mut ext.pyramid, textures.pyramid),
-                    (&mut ext.normal_texture, textures.normals),
-                ] {
-                    match slot {
-                        Some(handle) => {
-                            if let Err(e) = images.insert(handle.id(), image) {
-                                error!("bevy_pomkit: could not update a height texture: {e}");
-                            }
+        let result = if let Some(r) = done.get(&want) {
+            r.clone()
+        } else {
+            let cached = maps.cache.get(&want).cloned();
+            let r = match cached {
+                Some(t) if !changed.contains(&want.source) => Ok(t),
+                cached => {
+                    let Some(source) = images.get(want.source) else {
+                        if let Some(s) = server
+                            && let Some(bevy::asset::LoadState::Failed(err)) = s.get_load_state(want.source)
+                        {
+                            maps.report(format!(
+                                "bevy_pomkit: height map {name} failed to load ({err}): drawing the plain StandardMaterial"
+                            ));
+                            maps.built.insert(id, want);
                         }
-                        None => {
-                            let handle = images.add(image);
-                            maps.derived.insert(handle.id());
-                            *slot = Some(handle);
+                        continue;
+                    };
+                    let depth_scale = want_depth_scale(f32::from_bits(want.depth_scale_bits));
+                    match height::depths_from_image(source, want.kind, want.channel) {
+                        Ok(field) => {
+                            let built = height::height_images(&field, want.edges, depth_scale);
+                            Ok(maps.store(&mut images, &want, cached, built))
+                        }
+                        Err(e) => {
+                            Err(format!("bevy_pomkit: height map {name}: {e}: drawing the plain StandardMaterial"))
                         }
                     }
                 }
+            };
+            done.insert(want.clone(), r.clone());
+            r
+        };
+        let Some(mut material) = materials.get_mut(id) else { continue };
+        let ext = &mut material.extension;
+        match result {
+            Ok(t) => {
+                ext.heights = Some(t.heights);
+                ext.pyramid = Some(t.pyramid);
+                ext.normal_texture = Some(t.normals);
             }
-            Err(e) => {
-                maps.report(format!("bevy_pomkit: height map {name}: {e}: drawing the plain StandardMaterial"));
+            Err(message) => {
+                maps.report(message);
                 ext.heights = None;
                 ext.pyramid = None;
                 ext.normal_texture = None;
@@ -294,6 +344,10 @@ fn build_height_maps(
         }
         maps.built.insert(id, want);
     }
+    // Forget removed materials, and textures no material uses any more.
+    maps.built.retain(|id, _| materials.contains(*id));
+    let used: HashSet<Built> = maps.built.values().cloned().collect();
+    maps.cache.retain(|k, _| used.contains(k));
     // Parameters the tracers refuse (a depth scale that is not finite and positive, ...).
     for (id, m) in materials.iter() {
         if let Err(e) = m.extension.params() {
@@ -310,11 +364,12 @@ fn want_depth_scale(s: f32) -> f32 {
 
 /// Reports meshes drawn with a pomkit material that lack what tracing needs (UVs, normals and
 /// tangents); the shader draws them as the plain standard material.
+/// The filter of the meshes `check_meshes` looks at: drawn with a pomkit material whose mesh
+/// or material was just set.
+type NewlyDrawn = (With<MeshMaterial3d<PomkitMaterial>>, Or<(Changed<Mesh3d>, Added<MeshMaterial3d<PomkitMaterial>>)>);
+
 fn check_meshes(
-    query: Query<
-        (Entity, &Mesh3d),
-        (With<MeshMaterial3d<PomkitMaterial>>, Or<(Changed<Mesh3d>, Added<MeshMaterial3d<PomkitMaterial>>)>),
-    >,
+    query: Query<(Entity, &Mesh3d), NewlyDrawn>,
     meshes: Res<Assets<Mesh>>,
     server: Option<Res<AssetServer>>,
     mut maps: ResMut<HeightMaps>,
