@@ -563,8 +563,11 @@ fn shadow_maps_see_the_traced_depth() {
     eprintln!("floor under the quad {u:.4} ({} px), outside {o:.4} ({} px)", under.len(), outside.len());
     assert!(under.len() > 500 && outside.len() > 500);
     assert!(o > 0.1, "the floor outside the quad is not lit");
+    // Lit from straight above with no ambient light, the floor in the quad's shadow would be
+    // black. Lit, it differs from the floor outside only by Burley diffuse's dependence on the
+    // view angle (a few percent here).
     assert!(
-        (u - o).abs() < 0.05 * o,
+        u > 0.8 * o,
         "the floor seen through the quad is {u}, the floor outside {o}: the shadow map holds the polygon's depth"
     );
 }
