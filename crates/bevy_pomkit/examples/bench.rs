@@ -19,20 +19,19 @@
 
 #[path = "support/headless.rs"]
 mod headless;
+#[path = "support/probe.rs"]
+mod probe;
 #[path = "support/scene.rs"]
 mod scene;
 
 use std::time::{Duration, Instant};
 
-use bevy::asset::RenderAssetUsages;
 use bevy::camera::Hdr;
 use bevy::camera::RenderTarget;
 use bevy::core_pipeline::tonemapping::Tonemapping;
-use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
-use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::pbr::ParallaxMappingMethod;
 use bevy::prelude::*;
-use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+use bevy::render::render_resource::TextureFormat;
 use bevy_pomkit::height::depth_image;
 use bevy_pomkit::{MapKind, Pomkit, PomkitDebug, PomkitMaterial, Technique};
 use clap::Parser;
@@ -138,23 +137,6 @@ fn frame_time(method: Method, pattern: Pattern, frames: usize) -> f64 {
     times[times.len() / 2]
 }
 
-/// The quad of the accuracy probe: 2 x 2 in y = 0, u along +x, v along +z.
-fn quad(generated: bool) -> Mesh {
-    let p = [[-1.0f32, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]];
-    let uv: Vec<[f32; 2]> = p.iter().map(|q| [(q[0] + 1.0) / 2.0, (q[2] + 1.0) / 2.0]).collect();
-    let mut mesh = Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, p.to_vec())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; 4])
-        .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv)
-        .with_inserted_indices(Indices::U32(vec![0, 2, 1, 0, 3, 2]));
-    if generated {
-        mesh.generate_tangents().expect("the quad has normals and UVs");
-    } else {
-        mesh.insert_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, 1.0]; 4]);
-    }
-    mesh
-}
-
 /// A half-float image whose texel centres hold their own UV: sampled bilinearly at `uv`, it
 /// returns `uv` (away from the tile's edges).
 fn uv_image(n: u32) -> Image {
@@ -167,19 +149,7 @@ fn uv_image(n: u32) -> Image {
             }
         }
     }
-    let mut image = Image::new(
-        Extent3d { width: n, height: n, depth_or_array_layers: 1 },
-        TextureDimension::D2,
-        data,
-        TextureFormat::Rgba16Float,
-        RenderAssetUsages::RENDER_WORLD,
-    );
-    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
-        address_mode_u: ImageAddressMode::Repeat,
-        address_mode_v: ImageAddressMode::Repeat,
-        ..ImageSamplerDescriptor::linear()
-    });
-    image
+    scene::repeating_image(n, n, data, TextureFormat::Rgba16Float)
 }
 
 struct Accuracy {
@@ -194,7 +164,8 @@ struct Accuracy {
 /// exact tracer.
 fn accuracy(method: Method, field: &HeightField, surface: &Surface, generated: bool) -> Accuracy {
     let mut app = Headless::new(PW, PH);
-    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(generated));
+    let tangents = if generated { probe::Tangents::Generated } else { probe::Tangents::Imported };
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(probe::quad(tangents));
     let camera_at = Transform::from_xyz(0.0, 1.2, 1.4).looking_at(Vec3::new(0.0, -0.2, -0.2), Vec3::Y);
     let target = RenderTarget::Image(app.target().into());
     let camera = app.world().spawn((Camera3d::default(), Hdr, Tonemapping::None, Msaa::Off, camera_at, target)).id();
@@ -241,11 +212,8 @@ fn accuracy(method: Method, field: &HeightField, surface: &Surface, generated: b
         for x in 0..PW {
             let Ok(ray) = cam.viewport_to_world(gt, Vec2::new(x as f32 + 0.5, y as f32 + 0.5)) else { continue };
             let d = ray.direction.as_vec3();
-            if d.y >= -1e-4 {
-                continue;
-            }
-            let p = ray.origin + d * (-ray.origin.y / d.y);
-            let uv0 = Vec2::new((p.x + 1.0) / 2.0, (p.z + 1.0) / 2.0);
+            let Some(p) = probe::hit_plane(ray, 0.0) else { continue };
+            let uv0 = probe::quad_uv(p);
             if uv0.min_element() < 0.02 || uv0.max_element() > 0.98 {
                 continue;
             }

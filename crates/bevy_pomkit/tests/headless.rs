@@ -6,6 +6,8 @@
 
 #[path = "../examples/support/headless.rs"]
 mod headless;
+#[path = "../examples/support/probe.rs"]
+mod probe;
 
 use std::sync::Mutex;
 use std::time::Duration;
@@ -16,7 +18,6 @@ use bevy::camera::RenderTarget;
 use bevy::core_pipeline::prepass::DepthPrepass;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::math::Affine2;
-use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy_pomkit::height::depth_image;
 use bevy_pomkit::{HeightMaps, MapKind, Pomkit, PomkitDebug, PomkitMaterial, ShadowMode, ShadowParams, Technique};
@@ -25,6 +26,7 @@ use pomkit_core::EdgeMode;
 use pomkit_core::heightfield::{HeightField, mip_level_from_gradients};
 use pomkit_core::procedural::{Pattern, generate};
 use pomkit_core::trace::{Ray, Surface, TraceParams, trace};
+use probe::{Tangents, hit_plane, quad, quad_uv};
 
 static GPU: Mutex<()> = Mutex::new(());
 
@@ -32,39 +34,7 @@ const W: u32 = 160;
 const H: u32 = 120;
 const TIMEOUT: Duration = Duration::from_secs(300);
 
-/// How the test quad's tangents are made.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Tangents {
-    /// Written by hand in the glTF convention (B = w cross(N, T) points up the image), as an
-    /// authoring tool exports them: w = +1 here.
-    Imported,
-    /// The opposite handedness (w = -1, B down the image), as tangents from a generator that
-    /// takes glTF's v-down UVs for v-up ones have on real assets (docs/EMBEDDING.md).
-    Flipped,
-    /// Bevy's `Mesh::generate_tangents`.
-    Generated,
-}
-
 const ALL_TANGENTS: [Tangents; 3] = [Tangents::Imported, Tangents::Flipped, Tangents::Generated];
-
-/// A 2 x 2 quad in the y = 0 plane, normal +y, u along +x and v along +z (so up the image,
-/// -v, is -z), one UV unit per 2 world units.
-fn quad(tangents: Tangents) -> Mesh {
-    let p = [[-1.0f32, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]];
-    let uv: Vec<[f32; 2]> = p.iter().map(|q| [(q[0] + 1.0) / 2.0, (q[2] + 1.0) / 2.0]).collect();
-    let mut mesh = Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, p.to_vec())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; 4])
-        .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv)
-        .with_inserted_indices(Indices::U32(vec![0, 2, 1, 0, 3, 2]));
-    match tangents {
-        // cross(+y, +x) = -z: w = +1 points B up the image.
-        Tangents::Imported => mesh.insert_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, 1.0]; 4]),
-        Tangents::Flipped => mesh.insert_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, -1.0]; 4]),
-        Tangents::Generated => mesh.generate_tangents().expect("the quad has normals and UVs"),
-    }
-    mesh
-}
 
 fn tangent_w(mesh: &Mesh) -> f32 {
     match mesh.attribute(Mesh::ATTRIBUTE_TANGENT) {
@@ -143,21 +113,6 @@ fn camera_rays(app: &mut Headless, camera: Entity) -> Vec<Ray3d> {
         }
     }
     rays
-}
-
-/// Where a world ray meets the plane y = `y`, if in front of the eye.
-fn hit_plane(ray: Ray3d, y: f32) -> Option<Vec3> {
-    let d = ray.direction.as_vec3();
-    if d.y.abs() < 1e-6 {
-        return None;
-    }
-    let t = (y - ray.origin.y) / d.y;
-    (t > 0.0).then(|| ray.origin + d * t)
-}
-
-/// The quad's UV at a world point of its plane (or a plane parallel to it).
-fn quad_uv(p: Vec3) -> Vec2 {
-    Vec2::new((p.x + 1.0) / 2.0, (p.z + 1.0) / 2.0)
 }
 
 /// The pixels whose entry point lies on the quad, `margin` UV units inside its edges.

@@ -98,14 +98,13 @@ pub struct SceneHandles {
     pub sun: Entity,
 }
 
-/// An sRGB albedo image of `pattern`.
-pub fn albedo_image(pattern: Pattern, size: u32) -> Image {
-    let data: Vec<u8> = albedo(pattern, size, size).into_iter().flat_map(|[r, g, b]| [r, g, b, 255]).collect();
+/// A repeating, bilinearly filtered `width` x `height` image of `format` holding `data`.
+pub fn repeating_image(width: u32, height: u32, data: Vec<u8>, format: TextureFormat) -> Image {
     let mut image = Image::new(
-        Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+        Extent3d { width, height, depth_or_array_layers: 1 },
         TextureDimension::D2,
         data,
-        TextureFormat::Rgba8UnormSrgb,
+        format,
         RenderAssetUsages::RENDER_WORLD,
     );
     image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
@@ -114,6 +113,12 @@ pub fn albedo_image(pattern: Pattern, size: u32) -> Image {
         ..ImageSamplerDescriptor::linear()
     });
     image
+}
+
+/// An sRGB albedo image of `pattern`.
+pub fn albedo_image(pattern: Pattern, size: u32) -> Image {
+    let data: Vec<u8> = albedo(pattern, size, size).into_iter().flat_map(|[r, g, b]| [r, g, b, 255]).collect();
+    repeating_image(size, size, data, TextureFormat::Rgba8UnormSrgb)
 }
 
 /// A half-float depth map (white deep) for Bevy's own `StandardMaterial::depth_map`.
@@ -123,22 +128,8 @@ pub fn bevy_depth_map(pattern: Pattern, size: u32) -> Image {
 
 /// [`bevy_depth_map`] of any height field.
 pub fn bevy_depth_map_of(field: &pomkit_core::heightfield::HeightField) -> Image {
-    let size = field.width();
-    let height = field.height();
     let data: Vec<u8> = field.depths().iter().flat_map(|&d| pomkit_gpu::util::f32_to_f16(d).to_le_bytes()).collect();
-    let mut image = Image::new(
-        Extent3d { width: size, height, depth_or_array_layers: 1 },
-        TextureDimension::D2,
-        data,
-        TextureFormat::R16Float,
-        RenderAssetUsages::RENDER_WORLD,
-    );
-    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
-        address_mode_u: ImageAddressMode::Repeat,
-        address_mode_v: ImageAddressMode::Repeat,
-        ..ImageSamplerDescriptor::linear()
-    });
-    image
+    repeating_image(field.width(), field.height(), data, TextureFormat::R16Float)
 }
 
 /// The camera's pose: above and in front of the cube, looking down at about 30 degrees.
