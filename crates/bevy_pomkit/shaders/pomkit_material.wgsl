@@ -133,8 +133,8 @@ fn trace_fragment(in: VertexOutput) -> Traced {
     s.to_eye = pbr_functions::calculate_view(in.world_position, is_orthographic);
     let f = pomkit_tangent_frame(in.world_normal, in.world_tangent);
     s.n = f.n;
-    // Orient the bitangent up the image (-v) whatever the tangent's w says: Bevy's
-    // generate_tangents and authoring tools disagree on its sign (docs/EMBEDDING.md).
+    // Orient the bitangent up the image (-v) whatever the tangent's w says: tangents from
+    // different sources disagree on its sign (docs/EMBEDDING.md, Tangent handedness).
     var b = f.b;
     let det = draw_dx.x * draw_dy.y - draw_dx.y * draw_dy.x;
     if abs(det) > 1e-30 {

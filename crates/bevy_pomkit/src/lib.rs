@@ -38,9 +38,10 @@
 //! - height maps from any Bevy `Image` of a readable format, rebuilt when the image changes;
 //! - a debug output of the hit UV, the fetch count, the LOD weight or the self-shadow.
 //!
-//! Tangent handedness: Bevy's `Mesh::generate_tangents` and authoring tools disagree on the
-//! sign of `w` (ARCHITECTURE.md, bevy_pomkit). The shader orients the bitangent by the
-//! screen-space UV derivatives, so both trace the same way.
+//! Tangent handedness: tangents from different sources (authoring tools, Bevy's
+//! `Mesh::generate_tangents`) do not always agree on the sign of `w` (docs/EMBEDDING.md,
+//! Tangent handedness). The shader orients the bitangent by the screen-space UV derivatives, so
+//! either sign traces the same way.
 
 pub mod height;
 mod material;

@@ -11,12 +11,14 @@
 
 #![allow(dead_code, reason = "each example and test uses a part of the helper")]
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use bevy::app::{PluginsState, ScheduleRunnerPlugin};
 use bevy::asset::RenderAssetUsages;
 use bevy::image::Image;
+use bevy::log::LogPlugin;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::gpu_readback::{Readback, ReadbackComplete};
@@ -98,16 +100,18 @@ impl Headless {
     #[must_use]
     pub fn new(width: u32, height: u32) -> Self {
         let mut app = App::new();
-        app.add_plugins((
-            DefaultPlugins
-                .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
-                .disable::<WinitPlugin>()
-                // Render on the main thread: frames finish in order, and the render world's
-                // pipeline cache is at hand to see when shaders have compiled.
-                .disable::<PipelinedRenderingPlugin>(),
-            ScheduleRunnerPlugin::run_loop(Duration::ZERO),
-            PomkitPlugin,
-        ));
+        let mut plugins = DefaultPlugins
+            .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+            .disable::<WinitPlugin>()
+            // Render on the main thread: frames finish in order, and the render world's
+            // pipeline cache is at hand to see when shaders have compiled.
+            .disable::<PipelinedRenderingPlugin>();
+        // The global logger can be set once per process: later apps log through it.
+        static LOGGING: AtomicBool = AtomicBool::new(false);
+        if LOGGING.swap(true, Ordering::SeqCst) {
+            plugins = plugins.disable::<LogPlugin>();
+        }
+        app.add_plugins((plugins, ScheduleRunnerPlugin::run_loop(Duration::ZERO), PomkitPlugin));
         // Finish plugin set-up (the renderer initializes asynchronously).
         while app.plugins_state() == PluginsState::Adding {
             bevy::tasks::tick_global_task_pools_on_main_thread();
