@@ -34,7 +34,7 @@ use bevy::pbr::ParallaxMappingMethod;
 use bevy::prelude::*;
 use bevy::render::render_resource::TextureFormat;
 use bevy_pomkit::height::depth_image;
-use bevy_pomkit::{MapKind, Pomkit, PomkitDebug, PomkitMaterial, Technique};
+use bevy_pomkit::{MapKind, Pomkit, PomkitDebug, PomkitMaterial, ShadowMode, Technique};
 use clap::Parser;
 use headless::{Frame, Headless};
 use pomkit_core::EdgeMode;
@@ -55,6 +55,22 @@ struct Args {
     /// Skip the frame times (accuracy and fetches only).
     #[arg(long)]
     no_timing: bool,
+    /// Skip the accuracy probe (frame times only).
+    #[arg(long)]
+    no_accuracy: bool,
+    /// pomkit's self-shadow mode in the timed scene: none, hard, soft or exact.
+    #[arg(long, default_value = "soft")]
+    shadow: String,
+    /// Turn pomkit's pixel depth offset off in the timed scene.
+    #[arg(long)]
+    no_pixel_depth: bool,
+    /// Trace in the directional light's shadow cascades too (`shadow_pixel_depth`).
+    #[arg(long)]
+    shadow_pixel_depth: bool,
+    /// Methods to time (default all four): pom, exact, bevy-occlusion, bevy-relief, or any
+    /// pomkit technique.
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<String>,
 }
 
 const MAP: u32 = 256;
@@ -83,14 +99,46 @@ fn main() {
             std::process::exit(2);
         }
     };
+    let shadow: ShadowMode = match args.shadow.parse() {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("error: --shadow: {e}");
+            std::process::exit(2);
+        }
+    };
+    let timed: Vec<Method> = if args.methods.is_empty() {
+        methods().to_vec()
+    } else {
+        match args.methods.iter().map(|m| Method::parse(m)).collect() {
+            Ok(m) => m,
+            Err(e) => {
+                eprintln!("error: --methods: {e}");
+                std::process::exit(2);
+            }
+        }
+    };
     if !args.no_timing {
-        println!("| method | frame time, median of {} (ms) |", args.frames);
-        println!("|---|---|");
-        for method in methods() {
-            let ms = frame_time(method, pattern, args.frames);
-            println!("| {} | {ms:.1} |", method.name());
+        println!("| method | frame time, median of {} (ms) | pomkit self-shadows | pixel depth offset |", args.frames);
+        println!("|---|--:|---|---|");
+        for method in timed {
+            let opts =
+                SceneOptions { method, pattern, shadow, pixel_depth: !args.no_pixel_depth, ..Default::default() };
+            let ms = frame_time(&opts, args.frames);
+            let pdo = match (args.no_pixel_depth, args.shadow_pixel_depth) {
+                (true, _) => "off",
+                (false, false) => "camera",
+                (false, true) => "camera and shadow maps",
+            };
+            let (sh, pdo) = match method {
+                Method::Pomkit(_) => (shadow.name(), pdo),
+                Method::Bevy(_) => ("-", "-"),
+            };
+            println!("| {} | {ms:.1} | {sh} | {pdo} |", method.name());
         }
         println!();
+    }
+    if args.no_accuracy {
+        return;
     }
     let field = generate(pattern, MAP, MAP);
     let surface = Surface::new(field.clone(), EdgeMode::Wrap, DEPTH_SCALE);
@@ -117,12 +165,11 @@ fn main() {
     }
 }
 
-/// The median time of `frames` frames of the demo scene at 960 x 540.
-fn frame_time(method: Method, pattern: Pattern, frames: usize) -> f64 {
+/// The median time of `frames` frames of the demo scene with `opts` at 960 x 540.
+fn frame_time(opts: &SceneOptions, frames: usize) -> f64 {
     let mut app = Headless::new(960, 540);
-    let opts = SceneOptions { method, pattern, ..Default::default() };
     let target = RenderTarget::Image(app.target().into());
-    scene::spawn(app.world(), Some(target), &opts);
+    scene::spawn(app.world(), Some(target), opts);
     if let Some(h) = app.world().get_resource::<scene::SceneHandles>().and_then(|h| h.standard.clone())
         && let Some(mut m) = app.world().resource_mut::<Assets<StandardMaterial>>().get_mut(&h)
     {

@@ -185,19 +185,23 @@ fn surface_normal(s: Traced, uv: vec2<f32>) -> vec3<f32> {
     return pomkit_safe_normalize(t * nm.x + b * nm.y + s.n * nm.z, s.n);
 }
 
-/// The depth-buffer value of the traced point (or of the polygon where nothing was traced).
+/// The depth-buffer value of the traced point, where this pass writes it (POMKIT_PIXEL_DEPTH:
+/// pixel depth offset on, and not a directional shadow map without `shadow_pixel_depth`), else
+/// the polygon's.
 fn traced_depth(in: VertexOutput, s: Traced) -> f32 {
 #ifdef UNCLIPPED_DEPTH_ORTHO_EMULATION
     let polygon = in.unclipped_depth;
 #else
     let polygon = in.position.z;
 #endif
-    if !s.traced || (pomkit.flags & FLAG_PIXEL_DEPTH) == 0u || !(s.hit.depth > 0.0) {
-        return polygon;
+#ifdef POMKIT_PIXEL_DEPTH
+    if s.traced && (pomkit.flags & FLAG_PIXEL_DEPTH) != 0u && s.hit.depth > 0.0 {
+        let p = pomkit_hit_position(in.world_position.xyz, s.to_eye, s.n, s.hit.depth, pomkit.params.depth_scale, s.uv_scale);
+        // Bevy's depth buffers are reverse-Z (near = 1).
+        return pomkit_pixel_depth(p, view.clip_from_world, polygon, true);
     }
-    let p = pomkit_hit_position(in.world_position.xyz, s.to_eye, s.n, s.hit.depth, pomkit.params.depth_scale, s.uv_scale);
-    // Bevy's depth buffers are reverse-Z (near = 1).
-    return pomkit_pixel_depth(p, view.clip_from_world, polygon, true);
+#endif
+    return polygon;
 }
 
 #ifdef PREPASS_PIPELINE

@@ -5,7 +5,7 @@ use bevy::asset::Handle;
 use bevy::image::Image;
 use bevy::math::UVec4;
 use bevy::mesh::{Mesh, MeshVertexBufferLayoutRef, VertexAttributeDescriptor};
-use bevy::pbr::{MaterialExtension, MaterialExtensionKey, MaterialExtensionPipeline};
+use bevy::pbr::{MaterialExtension, MaterialExtensionKey, MaterialExtensionPipeline, MeshPipelineKey};
 use bevy::prelude::*;
 use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::{
@@ -73,10 +73,15 @@ pub struct Pomkit {
     /// The full technique runs up to this mip level of the height map and fades out over the
     /// next (Tatarchuk 2006); `f32::MAX` never fades. Default 4.
     pub lod_threshold: f32,
-    /// Write the depth of the traced point (in the main pass, the depth prepass and shadow
-    /// maps), so the surface meets other geometry where displaced geometry would. Turns off
-    /// early depth testing for these meshes. Default on.
+    /// Write the depth of the traced point in the main pass and the depth prepass (and the
+    /// shadow maps of point and spot lights, which Bevy 0.19's pipeline keys do not tell apart
+    /// from the depth prepass), so the surface meets other geometry where displaced geometry
+    /// would. Turns off early depth testing for these meshes. Default on.
     pub pixel_depth_offset: bool,
+    /// Also trace in directional lights' shadow maps, so their cascades hold the traced depth
+    /// (needs `pixel_depth_offset`). Default off: every cascade texel covered by the mesh then
+    /// runs the tracer, which cost 4x the frame on lavapipe (docs/BENCHMARKS.md, Bevy).
+    pub shadow_pixel_depth: bool,
     /// Shade with the height map's normals (default on). Off keeps the standard material's
     /// own normal map, or the vertex normal.
     pub normals: bool,
@@ -107,6 +112,7 @@ impl Pomkit {
             trace: TraceParams::default(),
             lod_threshold: pomkit_core::scene::Material::default().lod_threshold,
             pixel_depth_offset: true,
+            shadow_pixel_depth: false,
             normals: true,
             debug: PomkitDebug::Off,
             heights: None,
@@ -200,16 +206,18 @@ impl AsBindGroupShaderType<PomkitUniform> for Pomkit {
     }
 }
 
-/// The pipeline key: whether the fragment stage writes depth.
+/// The pipeline key: where the fragment stage writes the traced depth.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PomkitKey {
     /// Pixel depth offset on.
     pub pixel_depth_offset: bool,
+    /// And in directional lights' shadow maps.
+    pub shadow_pixel_depth: bool,
 }
 
 impl From<&Pomkit> for PomkitKey {
     fn from(m: &Pomkit) -> Self {
-        Self { pixel_depth_offset: m.pixel_depth_offset }
+        Self { pixel_depth_offset: m.pixel_depth_offset, shadow_pixel_depth: m.shadow_pixel_depth }
     }
 }
 
@@ -228,7 +236,10 @@ impl MaterialExtension for Pomkit {
         layout: &MeshVertexBufferLayoutRef,
         key: MaterialExtensionKey<Self>,
     ) -> Result<(), SpecializedMeshPipelineError> {
-        let pixel_depth = key.bind_group_data.pixel_depth_offset;
+        let k = key.bind_group_data;
+        // Only directional lights' shadow passes set this key (their cascades are orthographic).
+        let directional_shadow = key.mesh_key.contains(MeshPipelineKey::UNCLIPPED_DEPTH_ORTHO);
+        let pixel_depth = k.pixel_depth_offset && (k.shadow_pixel_depth || !directional_shadow);
         let prepass = descriptor.vertex.shader_defs.iter().any(|d| d == &ShaderDefVal::from("PREPASS_PIPELINE"));
         if pixel_depth {
             descriptor.vertex.shader_defs.push("POMKIT_PIXEL_DEPTH".into());

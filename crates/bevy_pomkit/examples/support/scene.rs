@@ -65,6 +65,8 @@ pub struct SceneOptions {
     pub depth_scale: f32,
     /// pomkit's pixel depth offset.
     pub pixel_depth: bool,
+    /// pomkit's pixel depth offset in the sun's shadow cascades too.
+    pub shadow_pixel_depth: bool,
     /// pomkit's LOD threshold (mip level).
     pub lod_threshold: f32,
 }
@@ -78,6 +80,7 @@ impl Default for SceneOptions {
             size: 512,
             depth_scale: 0.08,
             pixel_depth: true,
+            shadow_pixel_depth: false,
             lod_threshold: 4.0,
         }
     }
@@ -170,6 +173,7 @@ pub fn spawn(world: &mut World, target: Option<RenderTarget>, opts: &SceneOption
                 .with_depth_scale(opts.depth_scale);
             ext.map_kind = MapKind::Depth;
             ext.pixel_depth_offset = opts.pixel_depth;
+            ext.shadow_pixel_depth = opts.shadow_pixel_depth;
             ext.lod_threshold = opts.lod_threshold;
             let mut materials = world.resource_mut::<Assets<PomkitMaterial>>();
             let cube = materials.add(PomkitMaterial { base: base.clone(), extension: ext.clone() });
