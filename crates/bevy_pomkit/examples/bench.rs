@@ -71,6 +71,10 @@ struct Args {
     /// pomkit technique.
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
+    /// Time the one method given and print its row only (each method is timed in a process of
+    /// its own: Bevy apps made one after another in a process slow down).
+    #[arg(long, hide = true)]
+    child: bool,
 }
 
 const MAP: u32 = 256;
@@ -117,12 +121,16 @@ fn main() {
             }
         }
     };
-    if !args.no_timing {
-        println!("| method | frame time, median of {} (ms) | pomkit self-shadows | pixel depth offset |", args.frames);
-        println!("|---|--:|---|---|");
+    if args.child {
         for method in timed {
-            let opts =
-                SceneOptions { method, pattern, shadow, pixel_depth: !args.no_pixel_depth, ..Default::default() };
+            let opts = SceneOptions {
+                method,
+                pattern,
+                shadow,
+                pixel_depth: !args.no_pixel_depth,
+                shadow_pixel_depth: args.shadow_pixel_depth,
+                ..Default::default()
+            };
             let ms = frame_time(&opts, args.frames);
             let pdo = match (args.no_pixel_depth, args.shadow_pixel_depth) {
                 (true, _) => "off",
@@ -134,6 +142,28 @@ fn main() {
                 Method::Bevy(_) => ("-", "-"),
             };
             println!("| {} | {ms:.1} | {sh} | {pdo} |", method.name());
+        }
+        return;
+    }
+    if !args.no_timing {
+        println!("| method | frame time, median of {} (ms) | pomkit self-shadows | pixel depth offset |", args.frames);
+        println!("|---|--:|---|---|");
+        for method in timed {
+            // A process per method, this program again with --child.
+            let mut child = std::process::Command::new(std::env::current_exe().expect("the running program"));
+            child.args(["--child", "--no-accuracy", "--methods", &method.name(), "--frames", &args.frames.to_string()]);
+            child.args(["--pattern", &args.pattern, "--shadow", &args.shadow]);
+            if args.no_pixel_depth {
+                child.arg("--no-pixel-depth");
+            }
+            if args.shadow_pixel_depth {
+                child.arg("--shadow-pixel-depth");
+            }
+            match child.stderr(std::process::Stdio::null()).output() {
+                Ok(out) if out.status.success() => print!("{}", String::from_utf8_lossy(&out.stdout)),
+                Ok(out) => println!("| {} | failed ({}) | | |", method.name(), out.status),
+                Err(e) => println!("| {} | failed ({e}) | | |", method.name()),
+            }
         }
         println!();
     }

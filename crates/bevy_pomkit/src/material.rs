@@ -79,8 +79,9 @@ pub struct Pomkit {
     /// would. Turns off early depth testing for these meshes. Default on.
     pub pixel_depth_offset: bool,
     /// Also trace in directional lights' shadow maps, so their cascades hold the traced depth
-    /// (needs `pixel_depth_offset`). Default off: every cascade texel covered by the mesh then
-    /// runs the tracer, which cost 4x the frame on lavapipe (docs/BENCHMARKS.md, Bevy).
+    /// (needs `pixel_depth_offset`). Default off: every cascade texel the mesh covers then runs
+    /// the tracer instead of Bevy's depth-only shadow pass, which made the demo frame 4x slower
+    /// on lavapipe (docs/BENCHMARKS.md, Bevy).
     pub shadow_pixel_depth: bool,
     /// Shade with the height map's normals (default on). Off keeps the standard material's
     /// own normal map, or the vertex normal.
