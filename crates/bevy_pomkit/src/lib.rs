@@ -34,7 +34,8 @@
 //!   light's direct contribution only;
 //! - the LOD fade: the full technique up to a mip level of the height map, faded out over the
 //!   next;
-//! - pixel depth offset, in the main pass, the depth prepass and the shadow passes;
+//! - pixel depth offset, in the main pass and the depth prepass, and on request in directional
+//!   lights' shadow cascades;
 //! - height maps from any Bevy `Image` of a readable format, rebuilt when the image changes;
 //! - a debug output of the hit UV, the fetch count, the LOD weight or the self-shadow.
 //!

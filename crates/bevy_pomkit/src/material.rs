@@ -80,8 +80,8 @@ pub struct Pomkit {
     pub pixel_depth_offset: bool,
     /// Also trace in directional lights' shadow maps, so their cascades hold the traced depth
     /// (needs `pixel_depth_offset`). Default off: every cascade texel the mesh covers then runs
-    /// the tracer instead of Bevy's depth-only shadow pass, which made the demo frame 4x slower
-    /// on lavapipe (docs/BENCHMARKS.md, Bevy).
+    /// the tracer instead of Bevy's depth-only shadow pass, which made the demo frame 3.4x
+    /// (pom) to 6.9x (exact) slower on lavapipe (docs/BENCHMARKS.md, Bevy).
     pub shadow_pixel_depth: bool,
     /// Shade with the height map's normals (default on). Off keeps the standard material's
     /// own normal map, or the vertex normal.
