@@ -316,7 +316,7 @@ fn accuracy(method: Method, field: &HeightField, surface: &Surface, flipped: boo
             let err = Vec2::new(du.min(1.0 - du), dv.min(1.0 - dv)).length() * n;
             errors.push(err);
             fetches.push(match (method, &fetch_frame) {
-                (Method::Pomkit(_), Some(f)) => (pixel4(f, x, y)[0] * 64.0).round() as u32,
+                (Method::Pomkit(_), Some(f)) => (f.at(x, y)[0] * 64.0).round() as u32,
                 (Method::Bevy(m), _) => bevy_fetches(field, uv0, Vec3::new(d.x, d.z, d.y), m, flipped),
                 _ => 0,
             });
@@ -333,10 +333,6 @@ fn accuracy(method: Method, field: &HeightField, surface: &Surface, flipped: boo
         mean_fetches: fetches.iter().sum::<u32>() as f32 / fetches.len().max(1) as f32,
         max_fetches: fetches.iter().copied().max().unwrap_or(0),
     }
-}
-
-fn pixel4(frame: &Frame, x: u32, y: u32) -> [f32; 4] {
-    frame.at(x, y)
 }
 
 fn pixel(frame: &Frame, x: u32, y: u32) -> Vec2 {

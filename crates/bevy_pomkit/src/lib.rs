@@ -359,9 +359,9 @@ fn build_height_maps(
 }
 
 /// The depth scale the maps are built with: a bad one is reported by `params` and the material
-/// drawn plain, so any positive stand-in will do here.
+/// drawn plain, so the tracers' own stand-in will do here.
 fn want_depth_scale(s: f32) -> f32 {
-    if s.is_finite() && s > 0.0 { s } else { pomkit_core::trace::TraceParams::default().depth_scale }
+    TraceParams { depth_scale: s, ..TraceParams::default() }.sanitized().depth_scale
 }
 
 /// Reports meshes drawn with a pomkit material that lack what tracing needs (UVs, normals and
