@@ -42,6 +42,7 @@ pub mod pyramid;
 pub mod render;
 pub mod scene;
 pub mod shadow;
+pub mod silhouette;
 pub mod tangent;
 pub mod trace;
 

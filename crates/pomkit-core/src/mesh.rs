@@ -697,7 +697,7 @@ impl Mesh {
     }
 
     /// The mesh itself when consistent, else a repaired copy (see the module documentation).
-    fn repaired(&self) -> Cow<'_, Mesh> {
+    pub(crate) fn repaired(&self) -> Cow<'_, Mesh> {
         if self.is_consistent() {
             return Cow::Borrowed(self);
         }
@@ -805,12 +805,12 @@ fn compute_uv_scale(positions: &[Vec3], uvs: &[Vec2], indices: &[u32]) -> Vec<Ve
 }
 
 /// `+1` unless `w < 0`.
-fn handedness(w: f32) -> f32 {
+pub(crate) fn handedness(w: f32) -> f32 {
     if w < 0.0 { -1.0 } else { 1.0 }
 }
 
 /// `t` made perpendicular to the unit `n` and unit length, or `n.any_orthonormal_vector()`.
-fn orthonormal_tangent(t: Vec3, n: Vec3) -> Vec3 {
+pub(crate) fn orthonormal_tangent(t: Vec3, n: Vec3) -> Vec3 {
     let t = t.normalize_or_zero();
     (t - n * n.dot(t)).try_normalize().filter(|r| r.dot(t) > 1e-4).unwrap_or_else(|| n.any_orthonormal_vector())
 }

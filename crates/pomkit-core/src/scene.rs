@@ -445,6 +445,10 @@ pub struct Material {
     /// Write the displaced depth to the depth buffer, so that displaced surfaces intersect
     /// other geometry where the real surface would.
     pub pixel_depth_offset: bool,
+    /// Silhouettes: trace under the curved surface the mesh's normals describe (per-vertex
+    /// curvature, [`crate::silhouette`]) and discard pixels whose ray leaves the relief, or
+    /// leaves the unit UV square with clamped edges. Off by default (it then costs nothing).
+    pub silhouette: bool,
 }
 
 impl Default for Material {
@@ -462,6 +466,7 @@ impl Default for Material {
             specular: 0.25,
             shininess: 32.0,
             pixel_depth_offset: true,
+            silhouette: false,
         }
     }
 }

@@ -467,7 +467,7 @@ impl Surface {
 /// numbers. The reduced point is exact (an f32 `uv` with `|uv| >= 1` is a multiple of its ulp,
 /// so is `uv - k < 1`; for `|uv| >= 2^23` it is 0: such a `uv` is a whole number of tiles); for
 /// small negative `uv` it may round up to 1, the same point of the surface within 2^-24.
-fn reduce_to_tile(uv: Vec2, edges: EdgeMode) -> (Vec2, DVec2) {
+pub(crate) fn reduce_to_tile(uv: Vec2, edges: EdgeMode) -> (Vec2, DVec2) {
     match edges {
         EdgeMode::Wrap => {
             let u = uv.as_dvec2();
@@ -482,12 +482,12 @@ fn reduce_to_tile(uv: Vec2, edges: EdgeMode) -> (Vec2, DVec2) {
 /// sum is formed in f64 and rounded once to f32, so far from the origin the result carries what
 /// f32 can hold there (at `u = 1e15` its spacing is 2^26 = 67 108 864 tiles: a hit there is the
 /// entry point, rounded, while its depth is the exact one of the reduced trace).
-fn unreduce(uv: Vec2, tile: DVec2) -> Vec2 {
+pub(crate) fn unreduce(uv: Vec2, tile: DVec2) -> Vec2 {
     if tile == DVec2::ZERO { uv } else { (uv.as_dvec2() + tile).as_vec2() }
 }
 
 /// The UV offset per unit depth along `dir` (unit, `dz < 0`): `depth_scale * (du, dv) / -dz`.
-fn uv_per_depth(dir: Vec3, depth_scale: f32) -> Vec2 {
+pub(crate) fn uv_per_depth(dir: Vec3, depth_scale: f32) -> Vec2 {
     Vec2::new(dir.x, dir.y) * (depth_scale / -dir.z)
 }
 
@@ -511,7 +511,7 @@ pub fn unit_direction(v: Vec3) -> Option<DVec3> {
 
 /// Normalizes `dir` ([`unit_direction`]) and steepens it to [`MIN_COS`]; `None` for rays that do
 /// not enter (`dz >= 0`, decided in f64 before rounding to f32) or are zero or not finite.
-fn entering(dir: Vec3) -> Option<Vec3> {
+pub(crate) fn entering(dir: Vec3) -> Option<Vec3> {
     let d = unit_direction(dir)?;
     if d.z >= 0.0 {
         return None;
@@ -554,14 +554,63 @@ pub fn trace(surface: &Surface, ray: &Ray, technique: Technique, params: &TraceP
 /// `n - 1 < MAX_SAMPLES` then `binary_steps <= 64`, and `exact` at most [`exact_step_bound`]
 /// steps.
 fn trace_entering(surface: &Surface, uv0: Vec2, dir: Vec3, technique: Technique, p: &TraceParams) -> Hit {
+    march(surface, uv0, dir, technique, p, &Straight)
+}
+
+/// How a marching technique reads the depth profile under its ray: the depth it compares with
+/// the ray's own depth `tau` in `[0, 1]` at the point `uv` the ray reaches there, and how far
+/// along the straight ray `tau = 1` lies (the UV extent of the march is scaled by it).
+///
+/// [`Straight`] is the flat tangent plane of every technique's source; [`crate::silhouette`]'s
+/// bent profile follows a curved surface. Generic, so the straight case compiles to the
+/// techniques as written (a multiplication by 1.0 and nothing else).
+pub(crate) trait Profile {
+    /// The depth the ray at parameter `tau` (point `uv`) is compared with.
+    fn depth(&self, surface: &Surface, uv: Vec2, tau: f32, lod: f32) -> f32;
+    /// The straight ray's depth at `tau = 1`.
+    fn extent(&self) -> f32;
+    /// Whether the march ends where the ray leaves the relief (so reaching `tau = 1` without a
+    /// hit is a miss, not the floor).
+    fn exits(&self) -> bool;
+}
+
+/// The techniques' own profile: the height field under the tangent plane.
+pub(crate) struct Straight;
+
+impl Profile for Straight {
+    #[inline]
+    fn depth(&self, surface: &Surface, uv: Vec2, _tau: f32, lod: f32) -> f32 {
+        surface.depth(uv, lod)
+    }
+    #[inline]
+    fn extent(&self) -> f32 {
+        1.0
+    }
+    #[inline]
+    fn exits(&self) -> bool {
+        false
+    }
+}
+
+/// The techniques over a depth profile: `parallax` and `iterative` read the surface directly
+/// (they have no march to bend), the others compare `profile`'s depth with the ray's.
+pub(crate) fn march<P: Profile>(
+    surface: &Surface,
+    uv0: Vec2,
+    dir: Vec3,
+    technique: Technique,
+    p: &TraceParams,
+    profile: &P,
+) -> Hit {
     let none = Hit { uv: uv0, depth: 0.0, fetches: 0 };
-    let s = uv_per_depth(dir, p.depth_scale);
+    let s = uv_per_depth(dir, p.depth_scale) * profile.extent();
     let at = |z: f32| uv0 + s * z;
     match technique {
         Technique::Flat | Technique::Normal => none,
         Technique::Parallax => {
             // Kaneko's offset d * ds * V.xy / V.z, limited (Welsh 2004) by dropping the division:
             // the shift never exceeds the sampled depth times the depth scale.
+            let s = uv_per_depth(dir, p.depth_scale);
             let d = surface.depth(uv0, p.lod);
             let offset = Vec2::new(dir.x, dir.y) * (d * p.depth_scale);
             hit_on_ray(uv0, s, offset, d * -dir.z, 1)
@@ -569,6 +618,7 @@ fn trace_entering(surface: &Surface, uv0: Vec2, dir: Vec3, technique: Technique,
         Technique::Iterative => {
             // Lengyel Listing 7.9 in pomkit's depth convention: the polygon is the top, so the
             // map holds n_z * d (no signed remap) and every step moves away from the viewer.
+            let s = uv_per_depth(dir, p.depth_scale);
             let k = p.iterations;
             let step = Vec2::new(dir.x, dir.y) * (p.depth_scale / k as f32);
             let mut uv = uv0;
@@ -589,15 +639,15 @@ fn trace_entering(surface: &Surface, uv0: Vec2, dir: Vec3, technique: Technique,
             for i in 0..n {
                 let z = i as f32 / n as f32;
                 fetches += 1;
-                if surface.depth(at(z), p.lod) <= z {
+                if profile.depth(surface, at(z), z, p.lod) <= z {
                     return Hit { uv: at(z), depth: z, fetches };
                 }
             }
             Hit { uv: at(1.0), depth: 1.0, fetches }
         }
-        Technique::PomClassic => pom_classic(surface, uv0, dir, p),
-        Technique::Pom => pom(surface, uv0, dir, s, p),
-        Technique::Relief => relief(surface, uv0, s, p),
+        Technique::PomClassic => pom_classic(surface, uv0, dir, p, profile),
+        Technique::Pom => pom(surface, uv0, dir, s, p, profile),
+        Technique::Relief => relief(surface, uv0, s, p, profile),
         Technique::Exact => exact_view(surface, uv0, s),
     }
 }
@@ -622,20 +672,20 @@ fn line_intersection(t0: f32, d0: f32, t1: f32, d1: f32) -> f32 {
 }
 
 /// Brawley & Tatarchuk 2004: 8 samples along the biased parallax vector.
-fn pom_classic(surface: &Surface, uv0: Vec2, dir: Vec3, p: &TraceParams) -> Hit {
+fn pom_classic<P: Profile>(surface: &Surface, uv0: Vec2, dir: Vec3, p: &TraceParams, profile: &P) -> Hit {
     // Parallax length tan(theta) = sqrt(1 - z^2) / z of the unit view vector; the bias
     // pb + (1 - pb)(2 cos(theta) - 1) shortens it toward grazing angles for pb < 1 (Brawley's
     // vertex shader). Clamped at 0 so the vector never points back toward the viewer.
     let cos = -dir.z;
     let bias = (p.perspective_bias + (1.0 - p.perspective_bias) * (2.0 * cos - 1.0)).max(0.0);
-    let s = uv_per_depth(dir, p.depth_scale) * bias;
+    let s = uv_per_depth(dir, p.depth_scale) * (bias * profile.extent());
     let n = 8;
     // Brawley samples at 1/8 .. 8/8 of the vector; the entry (t = 0) is not fetched, and the
     // first segment reuses the first sample's depth for its start, as the article's shader does.
     let mut prev = (0.0f32, f32::NAN);
     for i in 1..=n {
         let t = i as f32 / n as f32;
-        let d = surface.depth(uv0 + s * t, p.lod);
+        let d = profile.depth(surface, uv0 + s * t, t, p.lod);
         if prev.1.is_nan() {
             prev.1 = d;
         }
@@ -660,19 +710,19 @@ pub fn adaptive_samples(cos_view: f32, min_samples: u32, max_samples: u32) -> u3
 }
 
 /// Zink / Tatarchuk 2006 POM with optional secant refinement.
-fn pom(surface: &Surface, uv0: Vec2, dir: Vec3, s: Vec2, p: &TraceParams) -> Hit {
+fn pom<P: Profile>(surface: &Surface, uv0: Vec2, dir: Vec3, s: Vec2, p: &TraceParams, profile: &P) -> Hit {
     let n = adaptive_samples(-dir.z, p.min_samples, p.max_samples);
     let step = 1.0 / n as f32;
     // The entry sample: a real fetch, so the first segment's line is the surface's.
     let mut fetches = 1;
-    let mut prev = (0.0f32, surface.depth(uv0, p.lod));
+    let mut prev = (0.0f32, profile.depth(surface, uv0, 0.0, p.lod));
     if prev.1 <= 0.0 {
         return Hit { uv: uv0, depth: 0.0, fetches };
     }
     let mut bracket = None;
     for i in 1..=n {
         let t = if i == n { 1.0 } else { i as f32 * step };
-        let d = surface.depth(uv0 + s * t, p.lod);
+        let d = profile.depth(surface, uv0 + s * t, t, p.lod);
         fetches += 1;
         // Early exit: the first sample at or above the ray ends the search.
         if d <= t {
@@ -690,7 +740,7 @@ fn pom(surface: &Surface, uv0: Vec2, dir: Vec3, s: Vec2, p: &TraceParams) -> Hit
     // Secant refinement (as Unity HDRP): sample at the intersection and keep the half of the
     // bracket that still straddles the surface.
     for _ in 0..p.refine {
-        let d = surface.depth(uv0 + s * z, p.lod);
+        let d = profile.depth(surface, uv0 + s * z, z, p.lod);
         fetches += 1;
         if d > z {
             a = (z, d);
@@ -703,14 +753,14 @@ fn pom(surface: &Surface, uv0: Vec2, dir: Vec3, s: Vec2, p: &TraceParams) -> Hit
 }
 
 /// Relief mapping: linear search over `samples` planes, then binary refinement.
-fn relief(surface: &Surface, uv0: Vec2, s: Vec2, p: &TraceParams) -> Hit {
+fn relief<P: Profile>(surface: &Surface, uv0: Vec2, s: Vec2, p: &TraceParams, profile: &P) -> Hit {
     let n = p.samples;
     let mut fetches = 0;
     let (mut lo, mut hi) = (0.0f32, 1.0f32);
     for i in 1..n {
         let t = i as f32 / n as f32;
         fetches += 1;
-        if surface.depth(uv0 + s * t, p.lod) <= t {
+        if profile.depth(surface, uv0 + s * t, t, p.lod) <= t {
             hi = t;
             break;
         }
@@ -721,13 +771,16 @@ fn relief(surface: &Surface, uv0: Vec2, s: Vec2, p: &TraceParams) -> Hit {
     for _ in 0..p.binary_steps {
         let mid = 0.5 * (lo + hi);
         fetches += 1;
-        if surface.depth(uv0 + s * mid, p.lod) <= mid {
+        if profile.depth(surface, uv0 + s * mid, mid, p.lod) <= mid {
             hi = mid;
         } else {
             lo = mid;
         }
     }
-    let z = if p.binary_steps > 0 { 0.5 * (lo + hi) } else { hi };
+    // Where the march ends at the ray's exit from the relief, a search that never found the
+    // surface below the ray is a miss: report the end itself.
+    let missed = profile.exits() && hi >= 1.0;
+    let z = if p.binary_steps > 0 && !missed { 0.5 * (lo + hi) } else { hi };
     Hit { uv: uv0 + s * z, depth: z, fetches }
 }
 

@@ -33,6 +33,7 @@ use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals};
 use pomkit_core::mesh::{Mesh, tangent_ray};
 use pomkit_core::scene::{Light, Material, NormalMap, Scene, Texture};
 use pomkit_core::shadow::{ShadowMode, lod_weight, shadow};
+use pomkit_core::silhouette::{trace_curved, vertex_curvature, view_curvature};
 use pomkit_core::trace::{Ray, Surface, Technique, TraceParams, trace};
 use pomkit_core::{EdgeMode, mip_level_from_gradients};
 use rayon::prelude::*;
@@ -157,6 +158,9 @@ impl CpuRenderer {
             };
             let world = mesh.transformed(obj.transform);
             let displaced = opts.mode == Mode::Displaced && prep.material.height.is_some();
+            // Silhouettes need the surface's curvature, estimated on the world mesh (a
+            // non-uniform scale changes it); without them nothing is computed.
+            let curvature = if silhouettes(prep) { vertex_curvature(&world) } else { Vec::new() };
             let verts: Vec<ClipVertex> = (0..world.positions.len())
                 .map(|i| {
                     let p = world.positions[i];
@@ -177,6 +181,7 @@ impl CpuRenderer {
                             uv,
                             uv_scale: world.uv_scale[i],
                             depth,
+                            curvature: curvature.get(i).copied().unwrap_or(Vec3::ZERO),
                         },
                     }
                 })
@@ -192,6 +197,12 @@ impl CpuRenderer {
         }
         Ok(out)
     }
+}
+
+/// Whether the material traces with silhouettes: asked for, and a displacing technique on a
+/// height map (so never in the `displaced` reference, which has true outlines).
+fn silhouettes(prep: &Prepared) -> bool {
+    prep.material.silhouette && prep.surface.is_some() && prep.technique.displaces()
 }
 
 /// Upper bounds on the triangles the vertex stage makes of `scene` (displaced meshes
@@ -456,7 +467,8 @@ fn shade_tile(
             if slot.is_some_and(|s| s.z <= f.z) {
                 return;
             }
-            let mut s = shade(scene, prep, f);
+            // A silhouette pixel whose ray leaves the relief is discarded: it writes nothing.
+            let Some(mut s) = shade(scene, prep, f) else { return };
             if lod_tint && prep.surface.is_some() {
                 let w = lod_weight(s.lod, prep.material.lod_threshold);
                 let tint = Vec3::new(1.0, 0.25, 0.2).lerp(Vec3::new(0.25, 1.0, 0.3), w);
@@ -470,8 +482,8 @@ fn shade_tile(
     buf
 }
 
-/// The fragment stage.
-fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Sample {
+/// The fragment stage; `None` discards the fragment (a silhouette ray that left the relief).
+fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
     let m = &prep.material;
     let v = &f.v;
     let cam = &scene.camera;
@@ -500,9 +512,28 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Sample {
     // The full technique (weight > 0) and the normal-mapped fallback (weight < 1).
     let mut hit_uv = v.uv;
     let mut hit_depth = v.depth;
-    if let (Some(surface), true) = (&prep.surface, weight > 0.0 && prep.technique.displaces()) {
+    // How deep the hit lies along the view ray (pixel depth offset): the hit's depth, except
+    // under a curved surface.
+    let mut ray_depth = v.depth;
+    // With silhouettes the ray is traced even where the LOD fade shows normal mapping only:
+    // the relief's outline is decided there too (the rim of a curved mesh, seen at grazing
+    // angles, is where the mip level is highest).
+    if let (Some(surface), true) = (&prep.surface, (weight > 0.0 || silhouettes(prep)) && prep.technique.displaces()) {
         let p = TraceParams { lod, ..params };
-        let hit = trace(surface, &Ray::new(v.uv, dir), prep.technique, &p);
+        let ray = Ray::new(v.uv, dir);
+        let hit = if silhouettes(prep) {
+            let c = view_curvature(-to_eye, n, tangent, v.curvature, params.depth_scale);
+            let curved = trace_curved(surface, &ray, prep.technique, &p, c);
+            if curved.left {
+                return None;
+            }
+            ray_depth = curved.ray_depth;
+            curved.hit
+        } else {
+            let hit = trace(surface, &ray, prep.technique, &p);
+            ray_depth = hit.depth;
+            hit
+        };
         hit_uv = hit.uv;
         hit_depth = hit.depth;
         fetches += hit.fetches;
@@ -510,7 +541,10 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Sample {
             // Steep parallax stops on the first plane *below* the surface, up to one plane
             // spacing deep. Shadows traced from there start inside the relief and darken in
             // contour rings; lift the receiver onto the surface (one more fetch).
-            hit_depth = hit_depth.min(surface.depth(hit_uv, lod));
+            let lifted = hit_depth.min(surface.depth(hit_uv, lod));
+            // The lift moves the point up the view ray as well (pixel depth offset).
+            ray_depth = if silhouettes(prep) { ray_depth - (hit_depth - lifted) } else { lifted };
+            hit_depth = lifted;
             fetches += 1;
         }
     }
@@ -568,9 +602,9 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Sample {
     };
     // Pixel depth offset: move the depth to the traced point along the view ray.
     let mut z = f.z;
-    if m.pixel_depth_offset && hit_depth > 0.0 && weight > 0.0 && prep.technique.displaces() {
+    if m.pixel_depth_offset && ray_depth > 0.0 && weight > 0.0 && prep.technique.displaces() {
         let l_world = (v.uv_scale.x * v.uv_scale.y).max(0.0).sqrt();
-        let down = hit_depth * params.depth_scale * l_world; // world depth below the polygon
+        let down = ray_depth * params.depth_scale * l_world; // world depth below the polygon
         let cos = to_eye.dot(n).max(1e-3);
         let p = v.world - to_eye * (down / cos);
         let aspect_free = cam.projection(1.0) * cam.view(); // depth does not depend on aspect
@@ -579,7 +613,7 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Sample {
             z = (c.z / c.w).max(f.z);
         }
     }
-    Sample { color, z, uv: hit_uv, depth: hit_depth, shadow: vis, fetches: fetches as f32, lod }
+    Some(Sample { color, z, uv: hit_uv, depth: hit_depth, shadow: vis, fetches: fetches as f32, lod })
 }
 
 #[cfg(test)]

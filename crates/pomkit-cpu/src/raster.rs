@@ -19,6 +19,9 @@ pub struct Varyings {
     pub uv_scale: Vec2,
     /// Depth below the polygon (displaced reference geometry only; 0 otherwise).
     pub depth: f32,
+    /// The surface's curvature form `L * II` in the (T, B) basis
+    /// ([`pomkit_core::silhouette::vertex_curvature`]; 0 unless the material has silhouettes).
+    pub curvature: Vec3,
 }
 
 impl Varyings {
@@ -31,6 +34,7 @@ impl Varyings {
             uv: a.uv * w.x + b.uv * w.y + c.uv * w.z,
             uv_scale: a.uv_scale * w.x + b.uv_scale * w.y + c.uv_scale * w.z,
             depth: f(a.depth, b.depth, c.depth),
+            curvature: a.curvature * w.x + b.curvature * w.y + c.curvature * w.z,
         }
     }
 

@@ -65,6 +65,7 @@
 //! specular = 0.25                   # Blinn-Phong strength, >= 0
 //! shininess = 32.0                  # Blinn-Phong exponent, > 0
 //! pixel_depth_offset = true         # write the displaced depth to the depth buffer
+//! silhouette = false                # curved meshes show a displaced outline (docs/SCENES.md)
 //!
 //! [[object]]                        # at least one
 //! name = "floor"                    # default "object N"
@@ -364,6 +365,7 @@ struct MaterialFile {
     specular: Option<f32>,
     shininess: Option<f32>,
     pixel_depth_offset: Option<bool>,
+    silhouette: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -935,6 +937,7 @@ impl Loader<'_> {
             specular,
             shininess,
             pixel_depth_offset: m.pixel_depth_offset.unwrap_or(d.pixel_depth_offset),
+            silhouette: m.silhouette.unwrap_or(d.silhouette),
         })
     }
 
