@@ -58,7 +58,7 @@ struct Args {
     /// Skip the accuracy probe (frame times only).
     #[arg(long)]
     no_accuracy: bool,
-    /// pomkit's self-shadow mode in the timed scene: none, hard, soft or exact.
+    /// pomkit's self-shadow mode in the timed scene: none, hard, soft, exact or depth.
     #[arg(long, default_value = "soft")]
     shadow: String,
     /// Turn pomkit's pixel depth offset off in the timed scene.

@@ -28,10 +28,10 @@ struct Args {
     /// exact) or bevy-occlusion / bevy-relief.
     #[arg(long, default_value = "pom")]
     technique: String,
-    /// Self-shadow mode: none, hard, soft or exact.
+    /// Self-shadow mode: none, hard, soft, exact or depth.
     #[arg(long, default_value = "soft")]
     shadow: String,
-    /// Height pattern: bricks, pyramids, cobblestones, text, spike, waves.
+    /// Height pattern: bricks, pyramids, cobblestones, text, spike, waves, fur, grass.
     #[arg(long, default_value = "cobblestones")]
     pattern: String,
     /// Depth scale (UV units of one tile).

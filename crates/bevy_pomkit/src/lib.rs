@@ -30,7 +30,7 @@
 //! What the extension adds to the standard material (docs/EMBEDDING.md has the whole story):
 //! - any pomkit technique (`pom`, `relief`, `exact`, ...), in the material's UV space after its
 //!   `uv_transform`;
-//! - self-shadowing from Bevy's directional lights (hard, soft or exact), applied to each
+//! - self-shadowing from Bevy's directional lights (hard, soft, exact or depth), applied to each
 //!   light's direct contribution only;
 //! - the LOD fade: the full technique up to a mip level of the height map, faded out over the
 //!   next;

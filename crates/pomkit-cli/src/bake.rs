@@ -26,7 +26,7 @@ pub enum BakeVerb {
 #[derive(Args, Debug)]
 pub struct BakeInputs {
     /// Height map: an image file (PNG, JPEG, TIFF, EXR; 8/16-bit or float), or `builtin:NAME`
-    /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves), optionally
+    /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves, fur, grass), optionally
     /// sized as `builtin:NAME:WxH` (default 512x512). Several inputs, folders (their png, jpg,
     /// tif and exr files) and quoted globs bake a whole library: OUT is then a folder (see
     /// --name, --recursive).

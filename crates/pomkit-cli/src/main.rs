@@ -95,7 +95,7 @@ fn view(args: &ViewArgs) -> Result<()> {
 #[derive(Args, Debug, Clone)]
 pub(crate) struct HeightOption {
     /// Height map: an image file (PNG, JPEG, TIFF, EXR; 8/16-bit or float), or `builtin:NAME`
-    /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves), optionally
+    /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves, fur, grass), optionally
     /// sized as `builtin:NAME:WxH` (default 512x512).
     #[arg(long = "height", value_name = "H")]
     pub(crate) input: String,
@@ -190,7 +190,7 @@ fn parse_size(s: &str) -> Result<(u32, u32)> {
 
 #[derive(Args, Debug)]
 struct GenerateArgs {
-    /// bricks, pyramids, cobblestones, text, spike or waves.
+    /// bricks, pyramids, cobblestones, text, spike, waves, fur or grass.
     pattern: String,
     /// Output height map (16-bit grey PNG, white = high). The outputs appear only when the whole
     /// run succeeds and may not be read-only; a symbolic link is written through (the file it

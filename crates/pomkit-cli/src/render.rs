@@ -130,6 +130,13 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         for (name, _) in &aov_outputs {
             eprintln!("wrote {}", aov_path(&a.output, name).display());
         }
+        if let (Some(aovs), true) = (&out.aovs, aov_outputs.iter().any(|(n, _)| n == "fetches")) {
+            let total: f64 = aovs.fetches.iter().map(|&f| f64::from(f)).sum();
+            eprintln!(
+                "mean height fetches per covered pixel: {:.2} (view trace and shadows)",
+                total / out.covered.max(1) as f64
+            );
+        }
         return Ok(());
     }
     let mut panels = Vec::new();

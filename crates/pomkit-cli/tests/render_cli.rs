@@ -135,6 +135,17 @@ fn aovs_are_float_exr_beside_the_png_on(backend: &str) {
     let fetched = fetches.pixels().filter(|p| p[0] > 0.0).count();
     assert!(covered > 320 * 180 / 3 && fetched > covered / 2, "{backend}: covered {covered}, fetched {fetched}");
     assert!(dir.path().join("f.lod.exr").exists());
+    // The mean fetches it prints are the EXR's sum over the covered pixels.
+    let err = stderr(&out);
+    let printed: f64 = err
+        .split("mean height fetches per covered pixel: ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{backend}: no mean fetches in {err:?}"));
+    let total: f64 = fetches.pixels().map(|p| f64::from(p[0])).sum();
+    let mean = total / covered as f64;
+    assert!((printed - mean).abs() <= 0.01 + 0.005 * mean, "{backend}: printed {printed}, the EXR says {mean}");
 }
 
 /// A small scene file: one cobblestone plane with 64x64 maps, so the displaced reference

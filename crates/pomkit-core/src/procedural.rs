@@ -2,9 +2,9 @@
 //!
 //! Every pattern is a function of the texel centre's UV, `u = (x + 0.5) / w`, `v = (y + 0.5) / h`
 //! (ARCHITECTURE.md, Conventions: `(0, 0)` is the top-left corner, `v` runs down the rows). Bricks,
-//! pyramids, cobblestones and waves are periodic in `u` and `v` with period 1, so they tile
-//! seamlessly at any size, powers of two or not: the texel after the last column continues the
-//! first one. Text and spike are not periodic but are flat along the border, so they tile too.
+//! pyramids, cobblestones, waves, fur and grass are periodic in `u` and `v` with period 1, so
+//! they tile seamlessly at any size, powers of two or not: the texel after the last column
+//! continues the first one. Text and spike are not periodic but are flat along the border, so they tile too.
 //! Randomness comes from an integer hash of cell indices taken modulo the tile's cell count, so
 //! the output is deterministic and the same on every machine.
 //!
@@ -47,12 +47,35 @@ pub enum Pattern {
     /// A smooth analytic field, see [`waves_height`]:
     /// `h = 1/2 + 1/2 sin(2 pi k u) cos(2 pi k v)` with `k` = [`WAVES_PERIODS`].
     Waves,
+    /// Short dense fur for McGuire 2005's fur rendering by steep parallax (docs/REFERENCES.md):
+    /// [`FUR_HAIRS_PER_CELL`] hairs in each cell of a [`FUR_CELLS`] x [`FUR_CELLS`] grid per tile,
+    /// each at a hashed position with a hashed base radius and tip height (0.55 to 1). A hair
+    /// is a cone with concave flanks and a rounded tip, 1 x its tip height at the centre falling
+    /// to the skin (height 0, depth 1) at its base radius; where hairs overlap the highest wins.
+    /// Thin: at 512x512, 8% of the area lies above mid-height, in strands 2.3 texels thick on
+    /// average, and three quarters of it deeper than 0.75.
+    Fur,
+    /// Grass for McGuire 2005's fur and grass (docs/REFERENCES.md): [`GRASS_BLADES_PER_CELL`]
+    /// blades in each cell of a [`GRASS_CELLS`] x [`GRASS_CELLS`] grid per tile (sparser than
+    /// [`Pattern::Fur`]), each a thin, slightly curved ridge in a hashed direction whose top
+    /// edge rises to a pointed tip (heights 0.45 to 1) between steep sides, over a soil floor
+    /// at heights 0 to 0.08. At 512x512, 3% of the area lies above mid-height, in blades 2.3
+    /// texels thick on average.
+    Grass,
 }
 
 impl Pattern {
     /// Every pattern, in declaration order.
-    pub const ALL: [Pattern; 6] =
-        [Pattern::Bricks, Pattern::Pyramids, Pattern::Cobblestones, Pattern::Text, Pattern::Spike, Pattern::Waves];
+    pub const ALL: [Pattern; 8] = [
+        Pattern::Bricks,
+        Pattern::Pyramids,
+        Pattern::Cobblestones,
+        Pattern::Text,
+        Pattern::Spike,
+        Pattern::Waves,
+        Pattern::Fur,
+        Pattern::Grass,
+    ];
 
     /// The lowercase name used on the command line and in scene files (`"bricks"`, ...).
     #[must_use]
@@ -64,6 +87,8 @@ impl Pattern {
             Pattern::Text => "text",
             Pattern::Spike => "spike",
             Pattern::Waves => "waves",
+            Pattern::Fur => "fur",
+            Pattern::Grass => "grass",
         }
     }
 }
@@ -128,6 +153,8 @@ pub fn generate_with_progress(
             Pattern::Text => text(u, v).height,
             Pattern::Spike => spike_height(x, y, w, h),
             Pattern::Waves => waves_height(u, v),
+            Pattern::Fur => fur(u, v).height,
+            Pattern::Grass => grass(u, v).height,
         }
     });
     HeightField::from_height_fn(w, h, |x, y| heights[y as usize * w as usize + x as usize])
@@ -138,7 +165,9 @@ pub fn generate_with_progress(
 ///
 /// Bricks are red-brown with a per-brick tint in grey mortar, pyramids sandstone laid in
 /// courses, cobblestones grey to brown per stone on dark soil, text brass letters on a slate
-/// plate, waves deep to pale blue by height, and the spike an orange texel on light grey.
+/// plate, waves deep to pale blue by height, the spike an orange texel on light grey, fur warm
+/// brown per hair with dark roots and light tips on dark skin, and grass green blades with
+/// yellowish tips over brown soil.
 #[must_use]
 pub fn albedo(pattern: Pattern, width: u32, height: u32) -> Vec<[u8; 3]> {
     albedo_with_progress(pattern, width, height, &|_| {})
@@ -171,6 +200,8 @@ pub fn albedo_with_progress(
                 let t = waves_height(u, v);
                 mix([0.12, 0.3, 0.5], [0.7, 0.85, 0.9], t)
             }
+            Pattern::Fur => fur_albedo(u, v),
+            Pattern::Grass => grass_albedo(u, v),
         };
         rgb.map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)
     })
@@ -646,6 +677,176 @@ pub fn waves_gradient(u: f32, v: f32) -> (f32, f32) {
     (PI * k * cu * cv, -PI * k * su * sv)
 }
 
+// ---------------------------------------------------------------------------------------------
+// Fur and grass.
+// ---------------------------------------------------------------------------------------------
+
+/// [`Pattern::Fur`]: hair cells per tile along each axis.
+pub const FUR_CELLS: u32 = 32;
+/// [`Pattern::Fur`]: hairs per cell, each anywhere in its cell.
+pub const FUR_HAIRS_PER_CELL: u32 = 4;
+/// A hair's base radius, in cell units: from this ...
+const FUR_RADIUS_MIN: f32 = 0.24;
+/// ... to this (less than 1, so a hair reaches no further than the neighbouring cells).
+const FUR_RADIUS_MAX: f32 = 0.4;
+/// The lowest hair tip; the highest is 1.
+const FUR_TIP_MIN: f32 = 0.55;
+/// Rounding of a hair's tip, in base radii.
+const FUR_TIP_ROUND: f32 = 0.08;
+
+/// [`Pattern::Grass`]: blade cells per tile along each axis.
+pub const GRASS_CELLS: u32 = 16;
+/// [`Pattern::Grass`]: blades per cell, each centred anywhere in its cell.
+pub const GRASS_BLADES_PER_CELL: u32 = 3;
+/// A blade's half-length, in cell units: from this ...
+const GRASS_HALF_LENGTH_MIN: f32 = 0.22;
+/// ... to this.
+const GRASS_HALF_LENGTH_MAX: f32 = 0.4;
+/// A blade's half-width, in cell units: from this ...
+const GRASS_HALF_WIDTH_MIN: f32 = 0.035;
+/// ... to this. Length plus width stays under 1 cell (the blade reaches no further than the
+/// neighbouring cells), with the bend added.
+const GRASS_HALF_WIDTH_MAX: f32 = 0.06;
+/// The most a blade bends sideways at its ends, in cell units.
+const GRASS_BEND: f32 = 0.12;
+/// The lowest blade tip; the highest is 1.
+const GRASS_TIP_MIN: f32 = 0.45;
+/// The soil's highest point; its lowest is 0.
+const GRASS_SOIL: f32 = 0.08;
+
+/// What a point of fur or grass is.
+struct StrandSample {
+    height: f32,
+    /// How far up its strand the point is, `height / tip`, in `[0, 1]`; 0 on the skin or soil.
+    along: f32,
+    /// Hash of the strand; 0 on the skin or soil.
+    id: u32,
+}
+
+/// A hair's profile at `t` base radii from its axis: 1 on the axis, 0 from `t = 1` on; a cone
+/// with concave flanks, `(1 - s)^2`, of the rounded distance `s = (sqrt(t^2 + c^2) - c) /
+/// (sqrt(1 + c^2) - c)` (`c` = the tip's rounding), so the tip is smooth and the flanks steepen
+/// toward it.
+fn hair_profile(t: f32) -> f32 {
+    if t >= 1.0 {
+        return 0.0;
+    }
+    let c = FUR_TIP_ROUND;
+    let s = ((t * t + c * c).sqrt() - c) / ((1.0 + c * c).sqrt() - c);
+    let k = (1.0 - s).max(0.0);
+    k * k
+}
+
+/// Fur: `p = 32 (u, v)`; in each of the 3 x 3 cells around `p`, 4 hairs at hashed positions
+/// with hashed base radii `r` in `[0.24, 0.4]` cells and tips in `[0.55, 1]`; a hair stands
+/// `tip * hair_profile(|p - centre| / r)` high, the highest hair wins, and the skin is 0.
+fn fur(u: f32, v: f32) -> StrandSample {
+    let n = FUR_CELLS;
+    let (px, py) = (u * n as f32, v * n as f32);
+    let (cx, cy) = (px.floor(), py.floor());
+    let mut best = StrandSample { height: 0.0, along: 0.0, id: 0 };
+    for dj in -1..=1 {
+        for di in -1..=1 {
+            let (i, j) = (cx + di as f32, cy + dj as f32);
+            let cell = hash3(wrap_index(i, n), wrap_index(j, n), 51);
+            for k in 0..FUR_HAIRS_PER_CELL {
+                let id = hash3(cell, k, 52) | 1;
+                let (hx, hy) = (i + hash01(id, 0, 53), j + hash01(id, 1, 54));
+                let r = FUR_RADIUS_MIN + (FUR_RADIUS_MAX - FUR_RADIUS_MIN) * hash01(id, 2, 55);
+                let t = ((px - hx).powi(2) + (py - hy).powi(2)).sqrt() / r;
+                if t >= 1.0 {
+                    continue;
+                }
+                let tip = FUR_TIP_MIN + (1.0 - FUR_TIP_MIN) * hash01(id, 3, 56);
+                let along = hair_profile(t);
+                if tip * along > best.height {
+                    best = StrandSample { height: tip * along, along, id };
+                }
+            }
+        }
+    }
+    best
+}
+
+fn fur_albedo(u: f32, v: f32) -> [f32; 3] {
+    let f = fur(u, v);
+    let skin = scale([0.2, 0.12, 0.07], 0.85 + 0.3 * value_noise(u, v, 64, 61));
+    if f.id == 0 {
+        return skin;
+    }
+    // Each hair its own shade between dark brown and ginger, a little lighter or darker;
+    // dark at the root, pale toward the tip.
+    let hue = hash01(f.id, 4, 62);
+    let coat = mix([0.46, 0.27, 0.13], [0.84, 0.56, 0.29], 0.6 * hue + 0.4 * fbm(u, v, 8, 63));
+    let coat = scale(coat, 0.82 + 0.3 * hash01(f.id, 5, 64));
+    let root = scale(coat, 0.45);
+    let tip = mix(coat, [0.97, 0.89, 0.72], 0.6);
+    let hair = if f.along < 0.6 { mix(root, coat, f.along / 0.6) } else { mix(coat, tip, (f.along - 0.6) / 0.4) };
+    mix(skin, hair, smoothstep(f.along * 6.0))
+}
+
+/// Grass: `p = 16 (u, v)`; in each of the 3 x 3 cells around `p`, 3 blades, each centred at a
+/// hashed point and turned to a hashed direction, with a hashed half-length `L` in
+/// `[0.22, 0.4]` cells, half-width `w` in `[0.035, 0.06]`, bend `b` of at most 0.12 and tip in
+/// `[0.45, 1]`. In the blade's frame (`s` along it, `n` across, less the bend `b (s / L)^2`), it
+/// stands `tip * (1 - |s| / L) * sqrt(1 - (n / w)^2)` high: a pointed top edge over steep
+/// rounded sides. The highest blade wins; the soil is `0.08` of two octaves of value noise.
+fn grass(u: f32, v: f32) -> StrandSample {
+    let n = GRASS_CELLS;
+    let (px, py) = (u * n as f32, v * n as f32);
+    let (cx, cy) = (px.floor(), py.floor());
+    let soil = GRASS_SOIL * fbm(u, v, 24, 71);
+    let mut best = StrandSample { height: soil, along: 0.0, id: 0 };
+    for dj in -1..=1 {
+        for di in -1..=1 {
+            let (i, j) = (cx + di as f32, cy + dj as f32);
+            let cell = hash3(wrap_index(i, n), wrap_index(j, n), 72);
+            for k in 0..GRASS_BLADES_PER_CELL {
+                let id = hash3(cell, k, 73) | 1;
+                let (bx, by) = (i + hash01(id, 0, 74), j + hash01(id, 1, 75));
+                let (sin, cos) = (PI * hash01(id, 2, 76)).sin_cos();
+                let (dx, dy) = (px - bx, py - by);
+                let (s, across) = (dx * cos + dy * sin, -dx * sin + dy * cos);
+                let len = GRASS_HALF_LENGTH_MIN + (GRASS_HALF_LENGTH_MAX - GRASS_HALF_LENGTH_MIN) * hash01(id, 3, 77);
+                let half_width =
+                    GRASS_HALF_WIDTH_MIN + (GRASS_HALF_WIDTH_MAX - GRASS_HALF_WIDTH_MIN) * hash01(id, 4, 78);
+                let bend = GRASS_BEND * (2.0 * hash01(id, 5, 79) - 1.0);
+                let a = s.abs() / len;
+                if a >= 1.0 {
+                    continue;
+                }
+                let c = (across - bend * a * a) / half_width;
+                if c.abs() >= 1.0 {
+                    continue;
+                }
+                let tip = GRASS_TIP_MIN + (1.0 - GRASS_TIP_MIN) * hash01(id, 6, 80);
+                let along = (1.0 - a) * (1.0 - c * c).sqrt();
+                if tip * along > best.height {
+                    best = StrandSample { height: tip * along, along, id };
+                }
+            }
+        }
+    }
+    best
+}
+
+fn grass_albedo(u: f32, v: f32) -> [f32; 3] {
+    let g = grass(u, v);
+    let soil = scale([0.33, 0.23, 0.14], 0.75 + 0.4 * fbm(u, v, 40, 81));
+    if g.id == 0 {
+        return soil;
+    }
+    // Each blade its own green; darker at the base, yellowing toward the tip.
+    let hue = hash01(g.id, 7, 82);
+    let green = mix([0.2, 0.42, 0.1], [0.36, 0.58, 0.14], 0.7 * hue + 0.3 * fbm(u, v, 6, 83));
+    let green = scale(green, 0.85 + 0.25 * hash01(g.id, 8, 84));
+    let base = scale(green, 0.55);
+    let tip = mix(green, [0.8, 0.74, 0.36], 0.6);
+    let blade =
+        if g.along < 0.65 { mix(base, green, g.along / 0.65) } else { mix(green, tip, (g.along - 0.65) / 0.35) };
+    mix(soil, blade, smoothstep(g.along * 5.0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -737,7 +938,15 @@ mod tests {
             pyramid_height((x as f32 + 0.5) / 64.0 * 0.875, (y as f32 + 0.5) / 64.0 * 0.875)
         });
         assert!(!is_seamless(&half_pyramids));
-        for p in [Pattern::Bricks, Pattern::Pyramids, Pattern::Cobblestones, Pattern::Waves, Pattern::Text] {
+        for p in [
+            Pattern::Bricks,
+            Pattern::Pyramids,
+            Pattern::Cobblestones,
+            Pattern::Waves,
+            Pattern::Text,
+            Pattern::Fur,
+            Pattern::Grass,
+        ] {
             for (w, h) in [(256, 256), (37, 23), (100, 60)] {
                 let hf = generate(p, w, h);
                 for along_y in [false, true] {
@@ -868,6 +1077,218 @@ mod tests {
             assert!((gu - fu).abs() < 2e-2 && (gv - fv).abs() < 2e-2, "({u}, {v})");
         }
         assert!((waves_gradient(0.0, 0.0).0 - PI * 2.0).abs() < 1e-5);
+    }
+
+    /// Mean error of the field's bilinear samples against the pattern `f` itself, at points
+    /// halfway between texel centres: across the wrap seam (between the last texel and the
+    /// first, where only a tiling field is continuous) and inside, along x and along y.
+    fn seam_and_inner_errors(hf: &HeightField, f: impl Fn(f32, f32) -> f32) -> [(f32, f32); 2] {
+        let (w, h) = (hf.width(), hf.height());
+        let (wf, hf_) = (w as f32, h as f32);
+        // The field stores depth, the pattern gives heights.
+        let err = |u: f32, v: f32| (1.0 - hf.sample_bilinear(glam::Vec2::new(u, v), EdgeMode::Wrap) - f(u, v)).abs();
+        let mean = |xs: &mut dyn Iterator<Item = f32>| {
+            let (s, n) = xs.fold((0.0f32, 0u32), |(s, n), e| (s + e, n + 1));
+            s / n.max(1) as f32
+        };
+        // Along x: u = k / w is halfway between texels k - 1 and k; k = 0 is the seam.
+        let rows = |k: u32| (0..h).map(move |y| (k as f32 / wf, (y as f32 + 0.5) / hf_));
+        let cols = |k: u32| (0..w).map(move |x| ((x as f32 + 0.5) / wf, k as f32 / hf_));
+        let x_seam = mean(&mut rows(0).map(|(u, v)| err(u, v)));
+        let x_inner = mean(&mut (1..w).flat_map(rows).map(|(u, v)| err(u, v)));
+        let y_seam = mean(&mut cols(0).map(|(u, v)| err(u, v)));
+        let y_inner = mean(&mut (1..h).flat_map(cols).map(|(u, v)| err(u, v)));
+        [(x_seam, x_inner), (y_seam, y_inner)]
+    }
+
+    /// The strand patterns as functions of UV, for comparing with their fields.
+    fn strand_height(p: Pattern) -> fn(f32, f32) -> f32 {
+        match p {
+            Pattern::Fur => |u, v| fur(u, v).height,
+            _ => |u, v| grass(u, v).height,
+        }
+    }
+
+    #[test]
+    fn fur_and_grass_tile_seamlessly() {
+        for p in [Pattern::Fur, Pattern::Grass] {
+            let f = strand_height(p);
+            // Periodic with period 1 in u and v: the same strands one tile over, either way.
+            for k in 0..2000 {
+                let (u, v) = (hash01(k, 0, 90), hash01(k, 1, 91));
+                let here = f(u, v);
+                for (du, dv) in [(1.0, 0.0), (0.0, 1.0), (-1.0, -1.0), (1.0, -1.0)] {
+                    let there = f(u + du, v + dv);
+                    assert!((here - there).abs() < 2e-3, "{p} at ({u}, {v}) + ({du}, {dv}): {here} vs {there}");
+                }
+            }
+            // The field's bilinear samples across the seam are as close to the pattern as those
+            // inside (a field that did not tile would jump there), at even and odd sizes.
+            for (w, h) in [(512, 512), (300, 500)] {
+                let hf = generate(p, w, h);
+                for (axis, (seam, inner)) in ["x", "y"].into_iter().zip(seam_and_inner_errors(&hf, f)) {
+                    println!("{p} {w}x{h} along {axis}: mean error across the seam {seam:.4}, inside {inner:.4}");
+                    assert!(seam <= 1.5 * inner + 1e-3, "{p} {w}x{h} along {axis}: seam {seam}, inside {inner}");
+                }
+            }
+        }
+        // The check itself must reject a field that does not tile: the fur squeezed to 0.9 of
+        // a tile, whose last column does not lead into its first.
+        let squeezed = |u: f32, v: f32| fur(u * 0.9, v * 0.9).height;
+        let hf = HeightField::from_height_fn(512, 512, |x, y| {
+            let (u, v) = texel_uv(x, y, 512, 512);
+            squeezed(u, v)
+        });
+        for (seam, inner) in seam_and_inner_errors(&hf, squeezed) {
+            println!("fur squeezed to 0.9 tiles: mean error across the seam {seam:.4}, inside {inner:.4}");
+            assert!(seam > 1.5 * inner + 1e-3, "the seam check misses a field that does not tile: {seam} vs {inner}");
+        }
+    }
+
+    /// Statistics of a strand field `hs` (`w` x `h`, heights): the share of texels above
+    /// mid-height, the share below a quarter of the height (deep: depth over 3/4), the mean
+    /// thickness in texels of what stands above mid-height (at each such texel the shorter of
+    /// its horizontal and vertical runs above mid-height, wrapping), the tips (texels above
+    /// 0.3 and above their 8 neighbours; ties go to the first in row order) and their heights.
+    struct StrandStats {
+        above_mid: f32,
+        deep: f32,
+        thickness: f32,
+        tips: Vec<f32>,
+    }
+
+    fn strand_stats(hs: &[f32], w: usize, h: usize) -> StrandStats {
+        let at = |x: isize, y: isize| hs[y.rem_euclid(h as isize) as usize * w + x.rem_euclid(w as isize) as usize];
+        let high = |x: isize, y: isize| at(x, y) > 0.5;
+        let run = |x: isize, y: isize, dx: isize, dy: isize| {
+            let mut n = 1;
+            for sign in [-1, 1] {
+                let mut k = 1;
+                while k < (w + h) as isize && high(x + sign * k * dx, y + sign * k * dy) {
+                    n += 1;
+                    k += 1;
+                }
+            }
+            n
+        };
+        let (mut above, mut deep, mut thick, mut tips) = (0usize, 0usize, 0usize, Vec::new());
+        for y in 0..h as isize {
+            for x in 0..w as isize {
+                let v = at(x, y);
+                deep += usize::from(v < 0.25);
+                if high(x, y) {
+                    above += 1;
+                    thick += run(x, y, 1, 0).min(run(x, y, 0, 1));
+                }
+                let neighbours = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
+                let peak = neighbours.iter().enumerate().all(|(k, &(dx, dy))| {
+                    let n = at(x + dx, y + dy);
+                    if k < 4 { v > n } else { v >= n }
+                });
+                if v > 0.3 && peak {
+                    tips.push(v);
+                }
+            }
+        }
+        let n = (w * h) as f32;
+        StrandStats {
+            above_mid: above as f32 / n,
+            deep: deep as f32 / n,
+            thickness: thick as f32 / above.max(1) as f32,
+            tips,
+        }
+    }
+
+    fn mean_and_spread(xs: &[f32]) -> (f32, f32) {
+        let n = xs.len().max(1) as f32;
+        let mean = xs.iter().sum::<f32>() / n;
+        (mean, (xs.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / n).sqrt())
+    }
+
+    #[test]
+    fn fur_and_grass_are_thin_dense_strands_of_varied_heights() {
+        let (w, h) = (512usize, 512usize);
+        let fur_hs = heights(Pattern::Fur, w as u32, h as u32);
+        let grass_hs = heights(Pattern::Grass, w as u32, h as u32);
+        let fur_stats = strand_stats(&fur_hs, w, h);
+        let grass_stats = strand_stats(&grass_hs, w, h);
+        for (p, hs, s) in [(Pattern::Fur, &fur_hs, &fur_stats), (Pattern::Grass, &grass_hs, &grass_stats)] {
+            assert!(hs.iter().all(|v| (0.0..=1.0).contains(v)), "{p}");
+            let (tip_mean, tip_spread) = mean_and_spread(&s.tips);
+            println!(
+                "{p} {w}x{h}: {:.1}% above mid-height, {:.1}% deep, strands {:.2} texels thick, {} tips, \
+                 tip height {tip_mean:.2} +- {tip_spread:.2}",
+                100.0 * s.above_mid,
+                100.0 * s.deep,
+                s.thickness,
+                s.tips.len()
+            );
+            // Thin: most of the area deep, little of it above mid-height, and what stands there
+            // 1 to 4 texels thick at 512x512.
+            assert!(s.deep > 0.6, "{p}: only {} of the area is deep", s.deep);
+            assert!((0.01..=0.15).contains(&s.above_mid), "{p}: {} above mid-height", s.above_mid);
+            assert!((1.0..=4.0).contains(&s.thickness), "{p}: strands {} texels thick", s.thickness);
+            // Varied heights: tips spread over the range, not one height.
+            assert!(tip_spread > 0.08, "{p}: tip heights {tip_mean} +- {tip_spread}");
+            assert!(s.tips.iter().any(|&t| t > 0.95) && s.tips.iter().any(|&t| t < 0.65), "{p}");
+        }
+        // Dense fur: thousands of hairs per tile (4096 placed; some hide under taller ones),
+        // grass sparser, with a soil floor where fur has bare skin at depth 1.
+        let n_fur = (FUR_CELLS * FUR_CELLS * FUR_HAIRS_PER_CELL) as usize;
+        assert!(fur_stats.tips.len() > n_fur * 3 / 4 && fur_stats.tips.len() <= n_fur, "{}", fur_stats.tips.len());
+        assert!(grass_stats.tips.len() * 3 < fur_stats.tips.len(), "{}", grass_stats.tips.len());
+        let skin = fur_hs.iter().filter(|&&v| v == 0.0).count() as f32 / fur_hs.len() as f32;
+        assert!((0.1..=0.5).contains(&skin), "fur: bare skin on {skin} of the area");
+        let soil = grass_hs.iter().filter(|&&v| v <= GRASS_SOIL).count() as f32 / grass_hs.len() as f32;
+        assert!(soil > 0.6, "grass: soil on {soil} of the area");
+        assert!(grass_hs.iter().all(|&v| v >= 0.0) && grass_hs.iter().any(|&v| v > 0.02 && v < GRASS_SOIL));
+        // The strands stay thin at other sizes: the thickness scales with the texels per tile.
+        let small = strand_stats(&heights(Pattern::Fur, 256, 256), 256, 256);
+        assert!(small.thickness < fur_stats.thickness, "{} vs {}", small.thickness, fur_stats.thickness);
+    }
+
+    #[test]
+    fn fur_is_brown_with_light_tips_and_grass_green_with_yellow_tips_over_soil() {
+        let (w, h) = (256u32, 256u32);
+        let mean = |cs: &mut dyn Iterator<Item = [u8; 3]>| {
+            let (mut s, mut n) = ([0.0f32; 3], 0.0f32);
+            for c in cs {
+                (0..3).for_each(|k| s[k] += f32::from(c[k]));
+                n += 1.0;
+            }
+            assert!(n > 0.0);
+            s.map(|x| x / n)
+        };
+        for p in [Pattern::Fur, Pattern::Grass] {
+            let f = if p == Pattern::Fur { fur } else { grass };
+            let a = albedo(p, w, h);
+            let samples: Vec<(StrandSample, [u8; 3])> = (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    let (u, v) = texel_uv(x, y, w, h);
+                    (f(u, v), a[(y * w + x) as usize])
+                })
+                .collect();
+            let tips = mean(&mut samples.iter().filter(|(s, _)| s.along > 0.9).map(|(_, c)| *c));
+            let middle = mean(&mut samples.iter().filter(|(s, _)| (0.4..0.6).contains(&s.along)).map(|(_, c)| *c));
+            let roots = mean(&mut samples.iter().filter(|(s, _)| s.id != 0 && s.along < 0.2).map(|(_, c)| *c));
+            let floor = mean(&mut samples.iter().filter(|(s, _)| s.id == 0).map(|(_, c)| *c));
+            let luma = |c: [f32; 3]| c[0] + c[1] + c[2];
+            println!("{p}: tips {tips:?}, middle {middle:?}, roots {roots:?}, floor {floor:?}");
+            assert!(
+                luma(tips) > luma(middle) + 20.0 && luma(middle) > luma(roots) + 20.0,
+                "{p}: dark roots, light tips"
+            );
+            // Skin and soil are brown.
+            assert!(floor[0] > floor[1] + 10.0 && floor[1] > floor[2] + 10.0, "{p}: floor {floor:?}");
+            if p == Pattern::Fur {
+                assert!(middle[0] > middle[1] + 30.0 && middle[1] > middle[2] + 20.0, "fur: brown {middle:?}");
+            } else {
+                assert!(middle[1] > middle[0] + 30.0 && middle[1] > middle[2] + 60.0, "grass: green {middle:?}");
+                // Yellowing: the tips' red catches up with their green.
+                assert!(tips[0] / tips[1] > middle[0] / middle[1] + 0.15, "grass: yellow tips {tips:?}");
+            }
+        }
     }
 
     #[test]

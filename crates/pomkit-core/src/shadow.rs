@@ -3,7 +3,9 @@
 //! Sources: Brawley & Tatarchuk 2004 ("Self-Occlusion and Shadowing Computation": any sample of
 //! the profile above the light ray shadows the point), McGuire 2005 (shadow rays marched like
 //! view rays), Tatarchuk 2006 sections 3.2 (soft shadows by penumbra estimation; skip where
-//! N.L < 0) and 3.3 (LOD fade to normal mapping).
+//! N.L < 0) and 3.3 (LOD fade to normal mapping); McGuire 2005's fur and grass, after Lengyel,
+//! Praun, Finkelstein and Hoppe 2001 (self-shadowing that grows with depth, no shadow ray). The
+//! sources are listed in docs/REFERENCES.md.
 //!
 //! The light direction uses the ray convention of [`crate::trace`]: `(du, dv, dz)` *toward* the
 //! light, with `dz > 0` for a light above the surface. Visibility is 1 for lit, 0 for shadowed.
@@ -30,11 +32,21 @@ pub enum ShadowMode {
     /// The exact tracer along the light ray: shadowed if the ray meets the bilinear surface.
     /// Exact, hard-edged; O(log size) fetches typically.
     Exact,
+    /// No shadow ray: visibility `1 - depth` at the displaced point, from 1 on the polygon's
+    /// surface (the tips of fur or grass) to 0 at the deepest point (the skin or soil). Zero
+    /// fetches. McGuire 2005 ("Fur and Grass") approximates the self-shadowing of short straight
+    /// fur and grass "as simply increasing with depth", after Lengyel, Praun, Finkelstein and
+    /// Hoppe 2001, whose fur shells darken linearly from the tips down to the skin
+    /// (docs/REFERENCES.md). Meant for dense, thin relief, where every point is shadowed by
+    /// strands in every direction in proportion to how deep it lies; on sparse relief (bricks)
+    /// it darkens what the light actually reaches.
+    Depth,
 }
 
 impl ShadowMode {
     /// Every mode.
-    pub const ALL: [ShadowMode; 4] = [ShadowMode::None, ShadowMode::Hard, ShadowMode::Soft, ShadowMode::Exact];
+    pub const ALL: [ShadowMode; 5] =
+        [ShadowMode::None, ShadowMode::Hard, ShadowMode::Soft, ShadowMode::Exact, ShadowMode::Depth];
 
     /// The name used by the command line and scene files.
     #[must_use]
@@ -44,6 +56,7 @@ impl ShadowMode {
             ShadowMode::Hard => "hard",
             ShadowMode::Soft => "soft",
             ShadowMode::Exact => "exact",
+            ShadowMode::Depth => "depth",
         }
     }
 }
@@ -51,23 +64,23 @@ impl ShadowMode {
 impl std::str::FromStr for ShadowMode {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        ShadowMode::ALL
-            .into_iter()
-            .find(|m| m.name().eq_ignore_ascii_case(s.trim()))
-            .ok_or_else(|| format!("unknown shadow mode '{s}': expected one of none, hard, soft, exact"))
+        ShadowMode::ALL.into_iter().find(|m| m.name().eq_ignore_ascii_case(s.trim())).ok_or_else(|| {
+            let names: Vec<&str> = ShadowMode::ALL.iter().map(|m| m.name()).collect();
+            format!("unknown shadow mode '{s}': expected one of {}", names.join(", "))
+        })
     }
 }
 
 impl ShadowMode {
     /// The most fetches one [`shadow`] call may make in this mode with `params` on `surface`:
-    /// 0 for `none`; `max_samples - 1` for `hard` and `soft` (samples `1..n` with
+    /// 0 for `none` and `depth`; `max_samples - 1` for `hard` and `soft` (samples `1..n` with
     /// `n <= max_samples <= MAX_SAMPLES`); for `exact`, the exact tracer's bound
     /// ([`Surface::exact_fetch_bound`], which counts the fetch that lifts the receiver).
     #[must_use]
     pub fn fetch_bound(self, params: &TraceParams, surface: &Surface) -> u32 {
         let p = params.sanitized();
         match self {
-            ShadowMode::None => 0,
+            ShadowMode::None | ShadowMode::Depth => 0,
             ShadowMode::Hard | ShadowMode::Soft => p.max_samples.saturating_sub(1),
             ShadowMode::Exact => Technique::Exact.fetch_bound(&p, surface),
         }
@@ -103,7 +116,8 @@ pub struct Shadow {
 /// direction toward the light, `dz > 0` above the surface).
 ///
 /// Where the geometric N.L <= 0 the polygon faces away from the light: visibility 0 with no
-/// fetch (Tatarchuk 2006 skips the trace there). Samples use `params.lod` and the pom sample
+/// fetch (Tatarchuk 2006 skips the trace there). `depth` mode gives `1 - depth` (the depth
+/// clamped to `[0, 1]`) with no fetch. Samples use `params.lod` and the pom sample
 /// bounds, adapted to the light's angle as view rays are. `light` need not be unit length: any
 /// finite, non-zero vector is normalized ([`unit_direction`]); a zero or non-finite one gives
 /// visibility 1 with no fetch. Where the edges wrap, `uv` is first reduced to its tile (as
@@ -143,6 +157,8 @@ pub fn shadow(
     let s = Vec2::new(l.x, l.y) * (p.depth_scale / l.z.max(MIN_COS));
     match shadow.mode {
         ShadowMode::None => Shadow { visibility: 1.0, fetches: 0 },
+        // McGuire 2005's fur and grass: darker the deeper, no light ray.
+        ShadowMode::Depth => Shadow { visibility: 1.0 - depth, fetches: 0 },
         ShadowMode::Hard | ShadowMode::Soft => {
             let n = adaptive_samples(l.z, p.min_samples, p.max_samples);
             // Samples at climbed depths t_i = depth * i / n, i = 1 .. n - 1: the last point lies
@@ -204,6 +220,45 @@ pub fn lod_weight(mip_level: f32, threshold: f32) -> f32 {
 mod tests {
     use super::*;
     use crate::heightfield::{EdgeMode, HeightField};
+
+    #[test]
+    fn depth_shadow_is_one_minus_the_depth_with_no_fetch() {
+        let p = ShadowParams { mode: ShadowMode::Depth, softness: 0.1 };
+        for d in [0.0f32, 0.1, 0.25, 0.5, 0.8, 1.0] {
+            // On a flat field at depth d the point lies on the surface: nothing above it could
+            // shadow it (hard shadows say 1), but fur darkens with depth: 1 - d.
+            let s = Surface::new(HeightField::constant(16, 16, d), EdgeMode::Wrap, 0.1);
+            for (uv, light) in [
+                (Vec2::new(0.3, 0.7), Vec3::new(0.6, 0.2, 0.5)),
+                (Vec2::new(-3.2, 17.9), Vec3::new(0.0, 0.0, 1.0)),
+                (Vec2::new(0.99, 0.01), Vec3::new(-5.0, 3.0, 0.01)),
+            ] {
+                let sh = shadow(&s, uv, d, light, &p, &TraceParams::default());
+                assert_eq!(sh.fetches, 0, "depth {d}");
+                assert!((sh.visibility - (1.0 - d)).abs() < 1e-6, "depth {d}: {sh:?}");
+                let hard = ShadowParams { mode: ShadowMode::Hard, ..p };
+                assert_eq!(shadow(&s, uv, d, light, &hard, &TraceParams::default()).visibility, 1.0);
+            }
+            // The polygon facing away from the light (N.L <= 0): 0, as every mode.
+            for light in [Vec3::new(0.3, 0.2, 0.0), Vec3::new(0.3, -0.2, -0.5)] {
+                assert_eq!(
+                    shadow(&s, Vec2::splat(0.5), d, light, &p, &TraceParams::default()),
+                    Shadow { visibility: 0.0, fetches: 0 }
+                );
+            }
+        }
+        // The receiver's depth counts, not the field's: a hit below a coarser mip's surface, or
+        // out of range, is clamped to [0, 1].
+        let s = Surface::new(HeightField::constant(8, 8, 0.2), EdgeMode::Clamp, 0.1);
+        for (d, vis) in [(0.7, 0.3), (-0.5, 1.0), (1.5, 0.0), (f32::NAN, 1.0)] {
+            let sh = shadow(&s, Vec2::splat(0.5), d, Vec3::Z, &p, &TraceParams::default());
+            assert!((sh.visibility - vis).abs() < 1e-6 && sh.fetches == 0, "depth {d}: {sh:?}");
+        }
+        assert_eq!(ShadowMode::Depth.fetch_bound(&TraceParams::default(), &s), 0);
+        assert_eq!("Depth".parse::<ShadowMode>(), Ok(ShadowMode::Depth));
+        let err = "blurry".parse::<ShadowMode>().unwrap_err();
+        assert!(ShadowMode::ALL.iter().all(|m| err.contains(m.name())), "{err}");
+    }
 
     #[test]
     fn exact_shadow_lifts_a_receiver_below_the_surface() {

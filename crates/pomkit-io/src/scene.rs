@@ -59,7 +59,7 @@
 //! refine = 0                        # pom: secant refinement steps
 //! perspective_bias = 1.0            # pom-classic: 0 to 1 (1 = the exact parallax length)
 //! edges = "wrap"                    # wrap or clamp: texture addressing
-//! shadow = "none"                   # none, hard, soft or exact self-shadowing
+//! shadow = "none"                   # none, hard, soft, exact or depth self-shadowing
 //! softness = 0.1                    # soft: light's angular radius in radians, >= 0
 //! lod_threshold = 4.0               # mip level beyond which only normal mapping is done
 //! specular = 0.25                   # Blinn-Phong strength, >= 0
@@ -81,8 +81,8 @@
 //! # Built-in textures
 //!
 //! `albedo` and `height` also accept `"builtin:NAME"` or `"builtin:NAME:WxH"`, where NAME is a
-//! pattern of [`pomkit_core::procedural`] (bricks, pyramids, cobblestones, text, spike, waves)
-//! and `WxH` the size in texels (default 512x512, each side 1 to 16384). The built-in colour
+//! pattern of [`pomkit_core::procedural`] (bricks, pyramids, cobblestones, text, spike, waves,
+//! fur, grass) and `WxH` the size in texels (default 512x512, each side 1 to 16384). The built-in colour
 //! map matches the built-in height map of the same name. `depth_map`, `channel` and
 //! `normalize` describe how to read a height *image*; with a built-in height they are an
 //! error when set to anything but their defaults. `normal` takes files only.

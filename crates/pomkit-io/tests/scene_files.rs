@@ -356,6 +356,40 @@ fn builtin_textures_need_no_file() {
     assert_eq!((waves.width(), waves.height()), (3, 5));
 }
 
+/// McGuire 2005's fur and grass: the built-in maps and the depth shadow mode in a scene file.
+#[test]
+fn fur_and_grass_with_depth_shadows() {
+    let text = r#"
+        [camera]
+        eye = [0, 2, 4]
+        target = [0, 0, 0]
+        [[material]]
+        name = "fur"
+        albedo = "builtin:fur:48x40"
+        height = "builtin:Fur:48x40"
+        technique = "steep"
+        shadow = "depth"
+        [[material]]
+        name = "grass"
+        albedo = "builtin:grass:30x20"
+        height = "builtin:grass:30x20"
+        shadow = "DEPTH"
+        [[object]]
+        mesh = "sphere"
+        material = "fur"
+    "#;
+    let scene = parse_scene(text, Path::new("/nonexistent/folder")).unwrap();
+    for (m, pattern, (w, h)) in
+        [(&scene.materials[0], Pattern::Fur, (48, 40)), (&scene.materials[1], Pattern::Grass, (30, 20))]
+    {
+        assert_eq!(**m.height.as_ref().unwrap(), procedural::generate(pattern, w, h), "{pattern}");
+        let albedo = Texture::from_srgb8(w, h, &procedural::albedo(pattern, w, h)).unwrap();
+        assert_eq!(**m.albedo.as_ref().unwrap(), albedo, "{pattern}");
+        assert_eq!(m.shadow.mode, ShadowMode::Depth, "{pattern}");
+    }
+    assert_eq!(scene.materials[0].technique, Technique::Steep);
+}
+
 /// Loads `text` as `scene.toml` in a folder holding the test assets.
 fn load_err(text: &str) -> SceneError {
     let dir = tempfile::tempdir().unwrap();
@@ -461,7 +495,7 @@ fn unknown_names_list_the_choices() {
     assert_names(&err, &["material \"bricks\": technique \"pomm\" is unknown: expected one of flat, normal, "]);
     assert_eq!(err.field(), Some("technique"));
     let err = load_err(&with("material", "shadow = \"blurry\""));
-    assert_names(&err, &["shadow \"blurry\" is unknown", "none, hard, soft, exact"]);
+    assert_names(&err, &["shadow \"blurry\" is unknown", "none, hard, soft, exact, depth"]);
     let err = load_err(&with("material", "edges = \"mirror\""));
     assert_names(&err, &["edges \"mirror\"", "wrap or clamp"]);
     let err = load_err(&with("material", "channel = \"alpha\""));
