@@ -332,7 +332,8 @@ fn fit(m: &Mesh, i: usize, neighbours: &[u32]) -> Vec3 {
         glam::DMat3::from_cols(DVec3::new(sxx, sxy, 0.0), DVec3::new(sxy, sxx + syy, sxy), DVec3::new(0.0, sxy, syy));
     let scale = (sxx + syy).powi(3);
     let det = mat.determinant();
-    if !(det > 1e-9 * scale) {
+    // Neighbours on a line (or NaN sums) leave the form undetermined.
+    if det.is_nan() || det <= 1e-9 * scale {
         return Vec3::ZERO;
     }
     let form = mat.inverse() * DVec3::new(sxa, sya_xb, syb);

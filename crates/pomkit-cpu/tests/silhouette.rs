@@ -72,3 +72,47 @@ fn discarded_pixels_show_what_lies_behind_them() {
     }
     assert!(discarded > 1000, "{discarded} pixels discarded");
 }
+
+/// A lone triangle (too few neighbours to estimate a curvature) and a sphere whose normals are
+/// zero (repaired to the geometric ones, then fitted or flat) both render with silhouettes
+/// without a NaN pixel; with wrapping edges the lone triangle is the flat chart it is, so the
+/// picture equals the one without silhouettes.
+#[test]
+fn a_lone_triangle_and_degenerate_normals_give_the_flat_chart_and_finite_pixels() {
+    use pomkit_core::mesh::Mesh;
+    use pomkit_core::tangent::TangentMethod;
+    let tri = Mesh::new(
+        vec![Vec3::new(-1.5, -1.0, 0.0), Vec3::new(1.5, -1.0, 0.0), Vec3::new(0.0, 1.5, 0.0)],
+        // Smooth normals that disagree: a fit would find a strong curvature.
+        Some(vec![Vec3::new(-0.6, -0.3, 1.0), Vec3::new(0.6, -0.3, 1.0), Vec3::new(0.0, 0.7, 1.0)]),
+        vec![Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(0.5, 0.0)],
+        vec![0, 1, 2],
+        TangentMethod::default(),
+    )
+    .expect("a valid triangle");
+    let with_mesh = |mesh: Mesh, silhouette: bool| {
+        let mut s = scene(Shape::CobblestoneSphere, Technique::Pom, silhouette, 64);
+        s.objects[0].mesh = Arc::new(mesh);
+        s.camera.eye = Vec3::new(0.3, 0.4, 3.0);
+        s
+    };
+    let opts = RenderOptions { width: 96, height: 96, ..Default::default() };
+    let r = |s| CpuRenderer::new().render(&s, &opts, &|_, _| {}).expect("renders");
+    let (on, off) = (r(with_mesh(tri.clone(), true)), r(with_mesh(tri, false)));
+    assert!(on.color.iter().all(|c| c.is_finite()));
+    assert!(on.covered > 1000, "the triangle is drawn: {} pixels", on.covered);
+    assert_eq!(on.color, off.color, "a lone triangle is flat: silhouettes change nothing with wrapping edges");
+
+    let sphere = Mesh::uv_sphere(1.0, 16, 32);
+    let zero = Mesh::new(
+        sphere.positions.clone(),
+        Some(vec![Vec3::ZERO; sphere.positions.len()]),
+        sphere.uvs.clone(),
+        sphere.indices.clone(),
+        TangentMethod::default(),
+    )
+    .expect("zero normals are replaced by geometric ones");
+    let out = r(with_mesh(zero, true));
+    assert!(out.color.iter().all(|c| c.is_finite()), "a non-finite pixel");
+    assert!(out.covered > 1000);
+}

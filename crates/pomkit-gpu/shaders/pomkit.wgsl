@@ -38,6 +38,8 @@ const POMKIT_SHADOW_NONE: u32 = 0u;
 const POMKIT_SHADOW_HARD: u32 = 1u;
 const POMKIT_SHADOW_SOFT: u32 = 2u;
 const POMKIT_SHADOW_EXACT: u32 = 3u;
+/// Darkening with depth, no fetch (McGuire 2005's fur, after Lengyel et al. 2001).
+const POMKIT_SHADOW_DEPTH: u32 = 4u;
 
 /// `PomkitParams::edges`: the height map repeats (the sampler must use `repeat`).
 const POMKIT_WRAP: u32 = 0u;
@@ -638,6 +640,31 @@ fn pomkit_ray_extent(dir: vec3<f32>, depth_scale: f32) -> vec2<f32> {
     return dir.xy * (depth_scale / -dir.z);
 }
 
+/// How a marching technique reads the depth profile under its ray (pomkit_core trace.rs
+/// `Profile`): the march runs over `tau` in [0, 1] along the straight ray to depth `t_end`, and
+/// compares `(d + k * tau^2) / t_end` with `tau`. `pomkit_no_bend()` is the techniques' own flat
+/// tangent plane (k = 0, t_end = 1: the same numbers as without it); silhouette.wesl bends the
+/// ray under a curved surface. `exits` = 1 where the march ends at the ray's way out of the
+/// relief, so reaching tau = 1 without a hit is a miss.
+struct PomkitBend {
+    /// Curvature along the ray: the curved surface lies c * t^2 below the tangent plane.
+    c: f32,
+    /// c * t_end^2.
+    k: f32,
+    /// The straight ray's depth at tau = 1.
+    t_end: f32,
+    exits: u32,
+}
+
+fn pomkit_no_bend() -> PomkitBend {
+    return PomkitBend(0.0, 0.0, 1.0, 0u);
+}
+
+/// The depth a bent march compares with `tau` at `uv`.
+fn pomkit_bent_depth(heights: texture_2d<f32>, samp: sampler, bend: PomkitBend, uv: vec2<f32>, tau: f32, lod: f32) -> f32 {
+    return (pomkit_depth_at(heights, samp, uv, lod) + bend.k * tau * tau) / bend.t_end;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Parallax mapping with offset limiting (Kaneko 2001; Welsh 2004)
 // ---------------------------------------------------------------------------------------------
@@ -673,11 +700,15 @@ fn pomkit_trace_iterative(heights: texture_2d<f32>, samp: sampler, params: Pomki
 // ---------------------------------------------------------------------------------------------
 
 fn pomkit_trace_steep(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
-    let s = pomkit_ray_extent(dir, params.depth_scale);
+    return pomkit_march_steep(heights, samp, params, uv0, dir, lod, pomkit_no_bend());
+}
+
+fn pomkit_march_steep(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32, bend: PomkitBend) -> PomkitHit {
+    let s = pomkit_ray_extent(dir, params.depth_scale) * bend.t_end;
     let n = params.samples;
     for (var i = 0u; i < n; i++) {
         let z = f32(i) / f32(n);
-        if pomkit_depth_at(heights, samp, uv0 + s * z, lod) <= z {
+        if pomkit_bent_depth(heights, samp, bend, uv0 + s * z, z, lod) <= z {
             return PomkitHit(uv0 + s * z, z, i + 1u);
         }
     }
@@ -695,17 +726,21 @@ fn pomkit_trace_steep(heights: texture_2d<f32>, samp: sampler, params: PomkitPar
 // ---------------------------------------------------------------------------------------------
 
 fn pomkit_trace_pom_classic(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
+    return pomkit_march_pom_classic(heights, samp, params, uv0, dir, lod, pomkit_no_bend());
+}
+
+fn pomkit_march_pom_classic(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32, bend: PomkitBend) -> PomkitHit {
     let cos = -dir.z;
     let pb = params.perspective_bias;
     let bias = max(pb + (1.0 - pb) * (2.0 * cos - 1.0), 0.0);
-    let s = dir.xy * (params.depth_scale / -dir.z) * bias;
+    let s = dir.xy * (params.depth_scale / -dir.z) * (bias * bend.t_end);
     var t_prev = 0.0;
     var d_prev = 0.0;
     var found = false;
     var z = 1.0;
     for (var i = 1u; i <= 8u; i++) {
         let t = f32(i) / 8.0;
-        let d = pomkit_depth_at(heights, samp, uv0 + s * t, lod);
+        let d = pomkit_bent_depth(heights, samp, bend, uv0 + s * t, t, lod);
         if i == 1u {
             d_prev = d;
         }
@@ -727,11 +762,15 @@ fn pomkit_trace_pom_classic(heights: texture_2d<f32>, samp: sampler, params: Pom
 // ---------------------------------------------------------------------------------------------
 
 fn pomkit_trace_pom(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
-    let s = pomkit_ray_extent(dir, params.depth_scale);
+    return pomkit_march_pom(heights, samp, params, uv0, dir, lod, pomkit_no_bend());
+}
+
+fn pomkit_march_pom(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32, bend: PomkitBend) -> PomkitHit {
+    let s = pomkit_ray_extent(dir, params.depth_scale) * bend.t_end;
     let n = pomkit_adaptive_samples(-dir.z, params.min_samples, params.max_samples);
     let step = 1.0 / f32(n);
     var fetches = 1u;
-    var a = vec2<f32>(0.0, pomkit_depth_at(heights, samp, uv0, lod));
+    var a = vec2<f32>(0.0, pomkit_bent_depth(heights, samp, bend, uv0, 0.0, lod));
     if a.y <= 0.0 {
         return PomkitHit(uv0, 0.0, fetches);
     }
@@ -742,7 +781,7 @@ fn pomkit_trace_pom(heights: texture_2d<f32>, samp: sampler, params: PomkitParam
         if i == n {
             t = 1.0;
         }
-        let d = pomkit_depth_at(heights, samp, uv0 + s * t, lod);
+        let d = pomkit_bent_depth(heights, samp, bend, uv0 + s * t, t, lod);
         fetches += 1u;
         if d <= t {
             b = vec2<f32>(t, d);
@@ -756,7 +795,7 @@ fn pomkit_trace_pom(heights: texture_2d<f32>, samp: sampler, params: PomkitParam
     }
     var z = pomkit_line_intersection(a.x, a.y, b.x, b.y);
     for (var i = 0u; i < params.refine; i++) {
-        let d = pomkit_depth_at(heights, samp, uv0 + s * z, lod);
+        let d = pomkit_bent_depth(heights, samp, bend, uv0 + s * z, z, lod);
         fetches += 1u;
         if d > z {
             a = vec2<f32>(z, d);
@@ -773,7 +812,11 @@ fn pomkit_trace_pom(heights: texture_2d<f32>, samp: sampler, params: PomkitParam
 // ---------------------------------------------------------------------------------------------
 
 fn pomkit_trace_relief(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32) -> PomkitHit {
-    let s = pomkit_ray_extent(dir, params.depth_scale);
+    return pomkit_march_relief(heights, samp, params, uv0, dir, lod, pomkit_no_bend());
+}
+
+fn pomkit_march_relief(heights: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, lod: f32, bend: PomkitBend) -> PomkitHit {
+    let s = pomkit_ray_extent(dir, params.depth_scale) * bend.t_end;
     let n = params.samples;
     var fetches = 0u;
     var lo = 0.0;
@@ -781,7 +824,7 @@ fn pomkit_trace_relief(heights: texture_2d<f32>, samp: sampler, params: PomkitPa
     for (var i = 1u; i < n; i++) {
         let t = f32(i) / f32(n);
         fetches += 1u;
-        if pomkit_depth_at(heights, samp, uv0 + s * t, lod) <= t {
+        if pomkit_bent_depth(heights, samp, bend, uv0 + s * t, t, lod) <= t {
             hi = t;
             break;
         }
@@ -790,14 +833,16 @@ fn pomkit_trace_relief(heights: texture_2d<f32>, samp: sampler, params: PomkitPa
     for (var i = 0u; i < params.binary_steps; i++) {
         let mid = 0.5 * (lo + hi);
         fetches += 1u;
-        if pomkit_depth_at(heights, samp, uv0 + s * mid, lod) <= mid {
+        if pomkit_bent_depth(heights, samp, bend, uv0 + s * mid, mid, lod) <= mid {
             hi = mid;
         } else {
             lo = mid;
         }
     }
+    // Where the march ends at the ray's exit, a search that never found the surface is a miss.
+    let missed = bend.exits != 0u && hi >= 1.0;
     var z = hi;
-    if params.binary_steps > 0u {
+    if params.binary_steps > 0u && !missed {
         z = 0.5 * (lo + hi);
     }
     return PomkitHit(uv0 + s * z, z, fetches);
@@ -905,13 +950,176 @@ fn pomkit_receiver(technique: u32, heights: texture_2d<f32>, samp: sampler, hit:
     return pomkit_lift_to_surface(heights, samp, hit, lod);
 }
 
+// ===== module silhouette =====
+
+// pomkit shader library: silhouettes, the twin of pomkit_core silhouette.rs (Oliveira &
+// Policarpo 2005; docs/REFERENCES.md). The view ray is traced under the curved surface the
+// mesh's normals describe, and a ray that comes back out of the relief without meeting it is
+// reported as `left`: discard the fragment, and the mesh's outline becomes the displaced one.
+//
+// Per vertex, the host supplies the curvature form K = L * II in the vertex's (T, B) basis
+// (pomkit_core::silhouette::vertex_curvature; pomkit_gpu's GpuMesh carries it). Per fragment,
+// `pomkit_view_curvature` turns it and the view direction into c, the curvature along the ray:
+// the curved surface lies c * t^2 below the tangent plane where the straight ray is at depth t.
+// `pomkit_trace_curved` then marches the bent ray t - c t^2 with the technique's own loop.
+
+
+/// The largest |c| used (pomkit_core `MAX_CURVATURE`).
+const POMKIT_MAX_CURVATURE: f32 = 1e6;
+/// The most chords `exact` bends its ray into, and the sag (in depth units) it aims for.
+const POMKIT_MAX_CHORDS: u32 = 16u;
+const POMKIT_CHORD_SAG: f32 = 1e-3;
+
+/// A view trace under a curved surface.
+struct PomkitCurvedHit {
+    /// The hit: UV, depth below the curved surface (shade and shadow with it), fetches.
+    hit: PomkitHit,
+    /// How deep the hit lies along the straight view ray, below the tangent plane at the entry
+    /// point, in depth units: pass it to `pomkit_hit_position` for pixel depth offset.
+    ray_depth: f32,
+    /// The ray left the relief without meeting it (or left a clamped chart): discard.
+    left: bool,
+}
+
+/// The bent march for curvature `c` along the ray (pomkit_core `Bend::new`).
+fn pomkit_bend(c_in: f32) -> PomkitBend {
+    var c = 0.0;
+    // NaN and infinities count as 0 (flat), as on the CPU.
+    if abs(c_in) <= 3.4e38 {
+        c = clamp(c_in, -POMKIT_MAX_CURVATURE, POMKIT_MAX_CURVATURE);
+    }
+    if 4.0 * c <= 1.0 {
+        let t_end = 2.0 / (1.0 + sqrt(1.0 - 4.0 * c));
+        return PomkitBend(c, c * t_end * t_end, t_end, 0u);
+    }
+    let t_end = 1.0 / c;
+    return PomkitBend(c, t_end, t_end, 1u);
+}
+
+/// The curvature along a view ray: `view_ts` is the eye-to-point vector in the tangent frame
+/// (T, B, N components), `curvature` the interpolated K = (K_tt, K_tb, K_bb). 0 for rays that
+/// do not enter.
+fn pomkit_view_curvature(view_ts: vec3<f32>, curvature: vec3<f32>, depth_scale: f32) -> f32 {
+    let l2 = dot(view_ts, view_ts);
+    if !(l2 > 0.0) {
+        return 0.0;
+    }
+    let v = view_ts * inverseSqrt(l2);
+    if !(v.z < 0.0) {
+        return 0.0;
+    }
+    let vn = max(-v.z, POMKIT_MIN_COS);
+    let w = v.xy / vn;
+    let q = curvature.x * w.x * w.x + 2.0 * curvature.y * w.x * w.y + curvature.z * w.y * w.y;
+    let c = 0.5 * depth_scale * q;
+    if !(abs(c) <= 3.4e38) {
+        return 0.0;
+    }
+    return clamp(c, -POMKIT_MAX_CURVATURE, POMKIT_MAX_CURVATURE);
+}
+
+/// `exact` along the bent ray: the parabola z = t - c t^2 as chords, each walked exactly (the
+/// chords lie inside the parabola by at most |c| dt^2 / 4). The hit's `depth` and `ray_depth`
+/// are its straight depth; `left` when the ray left without a hit.
+fn pomkit_exact_curved(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, bend: PomkitBend) -> PomkitCurvedHit {
+    let map = pomkit_map(heights, pyramid, params);
+    let s = pomkit_ray_extent(dir, params.depth_scale);
+    let o = uv0 * map.size;
+    let dxy = s * map.size;
+    let c = bend.c;
+    let t_end = bend.t_end;
+    let chords = u32(clamp(ceil(sqrt(abs(c) * t_end * t_end / (4.0 * POMKIT_CHORD_SAG))), 1.0, f32(POMKIT_MAX_CHORDS)));
+    var fetches = 0u;
+    for (var j = 0u; j < chords; j++) {
+        let ta = t_end * f32(j) / f32(chords);
+        var tb = t_end * f32(j + 1u) / f32(chords);
+        if j + 1u == chords {
+            tb = t_end;
+        }
+        let za = ta - c * ta * ta;
+        let zb = tb - c * tb * tb;
+        let slope = (zb - za) / (tb - ta);
+        let walk = pomkit_exact_first_hit(heights, pyramid, map, vec3<f32>(o, za - slope * ta), vec3<f32>(dxy, slope), ta, tb);
+        fetches += walk.fetches;
+        if walk.t >= 0.0 {
+            return PomkitCurvedHit(PomkitHit((o + dxy * walk.t) / map.size, walk.t, fetches), walk.t, false);
+        }
+    }
+    return PomkitCurvedHit(PomkitHit(uv0 + s * t_end, t_end, fetches), t_end, bend.exits != 0u);
+}
+
+/// `pomkit_trace` under a surface of curvature `c` along the ray (`pomkit_view_curvature`;
+/// 0 gives `pomkit_trace`'s hit). The marching techniques march the bent ray, `exact` walks it
+/// as chords, `parallax` and `iterative` keep their offset and report `left` when it lies
+/// beyond the ray's exit. With clamped edges a ray entering inside the unit UV square whose
+/// hit lies outside it has left the chart.
+fn pomkit_trace_curved(technique: u32, heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv: vec2<f32>, ray: vec4<f32>, lod: f32, c: f32) -> PomkitCurvedHit {
+    let none = PomkitCurvedHit(PomkitHit(uv, 0.0, 0u), 0.0, false);
+    if !(ray.w > 0.0) {
+        return none;
+    }
+    let bend = pomkit_bend(c);
+    let tile = pomkit_entry_tile(uv, params.edges);
+    let uv0 = uv - tile;
+    let dir = ray.xyz;
+    var hit = PomkitHit(uv0, 0.0, 0u);
+    var t = 0.0;
+    var found = true;
+    switch technique {
+        case POMKIT_PARALLAX: {
+            hit = pomkit_trace_parallax(heights, samp, params, uv0, dir, lod);
+            t = hit.depth;
+            found = t - bend.c * t * t >= 0.0;
+        }
+        case POMKIT_ITERATIVE: {
+            hit = pomkit_trace_iterative(heights, samp, params, uv0, dir, lod);
+            t = hit.depth;
+            found = t - bend.c * t * t >= 0.0;
+        }
+        case POMKIT_STEEP, POMKIT_POM_CLASSIC, POMKIT_POM, POMKIT_RELIEF: {
+            switch technique {
+                case POMKIT_STEEP: {
+                    hit = pomkit_march_steep(heights, samp, params, uv0, dir, lod, bend);
+                }
+                case POMKIT_POM_CLASSIC: {
+                    hit = pomkit_march_pom_classic(heights, samp, params, uv0, dir, lod, bend);
+                }
+                case POMKIT_POM: {
+                    hit = pomkit_march_pom(heights, samp, params, uv0, dir, lod, bend);
+                }
+                default: {
+                    hit = pomkit_march_relief(heights, samp, params, uv0, dir, lod, bend);
+                }
+            }
+            t = hit.depth * bend.t_end;
+            found = !(bend.exits != 0u && hit.depth >= 1.0);
+        }
+        case POMKIT_EXACT: {
+            let r = pomkit_exact_curved(heights, pyramid, params, uv0, dir, bend);
+            hit = r.hit;
+            t = r.ray_depth;
+            found = !r.left;
+        }
+        default: {
+            return none;
+        }
+    }
+    let inside_entry = all(uv0 >= vec2<f32>(0.0)) && all(uv0 <= vec2<f32>(1.0));
+    let inside_hit = all(hit.uv >= vec2<f32>(0.0)) && all(hit.uv <= vec2<f32>(1.0));
+    let off_chart = params.edges == POMKIT_CLAMP && inside_entry && !inside_hit;
+    hit.uv += tile;
+    hit.depth = clamp(t - bend.c * t * t, 0.0, 1.0);
+    return PomkitCurvedHit(hit, max(t, 0.0), !found || off_chart);
+}
+
 // ===== module shadow =====
 
 // pomkit shader library: self-shadowing of the traced point (Brawley & Tatarchuk 2004; McGuire
 // 2005; Tatarchuk 2006 section 3.2; docs/REFERENCES.md), the twin of pomkit_core shadow.rs.
 //
 // Hard and soft shadows march from the traced point toward the light with pom's adaptive
-// sample count; exact shadows run the exact walk (exact.wesl) and need the pyramid.
+// sample count; exact shadows run the exact walk (exact.wesl) and need the pyramid; depth
+// shadows trace nothing: 1 - depth (McGuire 2005's fur and grass, after Lengyel et al. 2001).
 
 
 /// Visibility of the light from the traced point (`uv`, `depth`), for `params.shadow_mode`.
@@ -919,7 +1127,7 @@ fn pomkit_receiver(technique: u32, heights: texture_2d<f32>, samp: sampler, hit:
 /// tangent-space light vector; any length, z > 0 above the surface). Samples are read at mip
 /// `lod`, as the trace's. A zero or non-finite `light` gives 1; a light below the tangent plane
 /// gives 0 with no fetch (Tatarchuk 2006 skips the trace there; test the geometric N.L yourself
-/// to skip the call).
+/// to skip the call). `POMKIT_SHADOW_DEPTH` gives `1 - depth` with no fetch.
 fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv_in: vec2<f32>, depth_in: f32, light: vec3<f32>, lod: f32) -> PomkitShadow {
     let l = pomkit_unit(light);
     if !(dot(l, l) > 0.0) {
@@ -933,6 +1141,10 @@ fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampl
     if mode == POMKIT_SHADOW_NONE || depth <= 0.0 {
         // Nothing lies above the polygon's surface: a point on it is never self-shadowed.
         return PomkitShadow(1.0, 0u);
+    }
+    if mode == POMKIT_SHADOW_DEPTH {
+        // No shadow ray: darker the deeper the point, from lit tips to a black skin.
+        return PomkitShadow(1.0 - depth, 0u);
     }
     // The point in its own tile where the surface repeats (a visibility needs no tile back).
     let uv = uv_in - pomkit_entry_tile(uv_in, params.edges);

@@ -1,7 +1,7 @@
 //! pomkit-gpu: the wgpu/WGSL renderer.
 //!
 //! The same system as `pomkit-cpu`, on the GPU: every technique of docs/REFERENCES.md as a
-//! pipeline variant (a WGSL `override` constant), hard, soft and exact self-shadows, the LOD
+//! pipeline variant (a WGSL `override` constant), hard, soft, exact and depth self-shadows, the LOD
 //! fade and its tint view, Blinn-Phong shading and pixel depth offset; compute passes that
 //! rebuild a height map's mips, normals, parallax map and maximum-height pyramid on the GPU, so
 //! a height field may change every frame.
@@ -28,7 +28,7 @@ pub use context::GpuContext;
 #[cfg(feature = "renderer")]
 pub use host::{HeightBindings, HeightEncoding, HeightResource, HeightResourceOptions, HostError};
 #[cfg(feature = "renderer")]
-pub use material::{FrameUniforms, FrameView, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
+pub use material::{FrameUniforms, FrameView, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets, Variant};
 #[cfg(feature = "renderer")]
 pub use pipeline::{AttributeKind, PipelineError, PipelineOptions, VertexAttribute, VertexBuffer, VertexLayout};
 #[cfg(feature = "renderer")]

@@ -48,8 +48,38 @@ pub const AOV_FORMATS: [wgpu::TextureFormat; 2] = [wgpu::TextureFormat::Rgba32Fl
 /// pomkit's own material shader; the library is composed in front of it.
 pub const RENDER_WGSL: &str = include_str!("render.wgsl");
 
-/// Vertex layout: position, normal, tangent (xyz, w handedness), uv, uv scale, depth.
-const VERTEX_FLOATS: usize = 15;
+/// Vertex layout: position, normal, tangent (xyz, w handedness), uv, uv scale, depth,
+/// curvature.
+const VERTEX_FLOATS: usize = 18;
+
+/// Which fragment stage a material's pipeline runs: with pixel depth offset (`frag_depth`) or
+/// not, with silhouettes (fragments whose ray leaves the relief are discarded) or not. Each is
+/// its own entry point, so a pipeline pays only for what it uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Variant {
+    /// Write the traced depth (`fs_main_depth`, `fs_silhouette_depth`).
+    pub pixel_depth_offset: bool,
+    /// Trace under the curved surface and discard rays that leave (`fs_silhouette*`).
+    pub silhouette: bool,
+}
+
+impl Variant {
+    /// The variant `material` draws with.
+    #[must_use]
+    pub fn of(material: &GpuMaterial) -> Self {
+        Self { pixel_depth_offset: material.pixel_depth_offset, silhouette: material.silhouette }
+    }
+
+    /// The fragment entry point of `render.wgsl`.
+    fn entry_point(self) -> &'static str {
+        match (self.silhouette, self.pixel_depth_offset) {
+            (false, false) => "fs_main",
+            (false, true) => "fs_main_depth",
+            (true, false) => "fs_silhouette",
+            (true, true) => "fs_silhouette_depth",
+        }
+    }
+}
 
 /// The shader and its pipelines, created once per device.
 pub struct MaterialPipelines {
@@ -61,7 +91,7 @@ pub struct MaterialPipelines {
     pub material_layout: wgpu::BindGroupLayout,
     /// Bind group layout of group 2 (object).
     pub object_layout: wgpu::BindGroupLayout,
-    pipelines: HashMap<(u32, bool, PipelineOptions), wgpu::RenderPipeline>,
+    pipelines: HashMap<(u32, Variant, PipelineOptions), wgpu::RenderPipeline>,
     passes: HeightPasses,
     dummy: Arc<DummyTextures>,
 }
@@ -197,7 +227,19 @@ impl MaterialPipelines {
     /// The pipeline for `technique` if [`MaterialPipelines::pipeline`] created it already.
     #[must_use]
     pub fn cached(&self, technique: Technique, depth_offset: bool, targets: Targets) -> Option<&wgpu::RenderPipeline> {
-        self.pipelines.get(&(technique_index(technique), depth_offset, PipelineOptions::from(targets)))
+        let variant = Variant { pixel_depth_offset: depth_offset, silhouette: false };
+        self.cached_variant(technique, variant, &PipelineOptions::from(targets))
+    }
+
+    /// The pipeline for `technique` and `variant` if it was created already.
+    #[must_use]
+    pub fn cached_variant(
+        &self,
+        technique: Technique,
+        variant: Variant,
+        options: &PipelineOptions,
+    ) -> Option<&wgpu::RenderPipeline> {
+        self.pipelines.get(&(technique_index(technique), variant, options.clone()))
     }
 
     /// The pipeline drawing `technique` into `targets` with pomkit's own vertex layout
@@ -210,7 +252,8 @@ impl MaterialPipelines {
         depth_offset: bool,
         targets: Targets,
     ) -> &wgpu::RenderPipeline {
-        let key = (technique_index(technique), depth_offset, PipelineOptions::from(targets));
+        let variant = Variant { pixel_depth_offset: depth_offset, silhouette: false };
+        let key = (technique_index(technique), variant, PipelineOptions::from(targets));
         let (shader, layout) = (&self.shader, &self.layout);
         self.pipelines.entry(key).or_insert_with_key(|key| create_pipeline(device, shader, layout, technique, key))
     }
@@ -229,7 +272,23 @@ impl MaterialPipelines {
         depth_offset: bool,
         options: &PipelineOptions,
     ) -> Result<&wgpu::RenderPipeline, PipelineError> {
-        let key = (technique_index(technique), depth_offset, options.clone());
+        let variant = Variant { pixel_depth_offset: depth_offset, silhouette: false };
+        self.pipeline_variant(device, technique, variant, options)
+    }
+
+    /// [`MaterialPipelines::pipeline_with`] for any [`Variant`], silhouettes included
+    /// ([`Variant::of`] a material gives the one it needs).
+    ///
+    /// # Errors
+    /// As [`MaterialPipelines::pipeline_with`].
+    pub fn pipeline_variant(
+        &mut self,
+        device: &wgpu::Device,
+        technique: Technique,
+        variant: Variant,
+        options: &PipelineOptions,
+    ) -> Result<&wgpu::RenderPipeline, PipelineError> {
+        let key = (technique_index(technique), variant, options.clone());
         if !self.pipelines.contains_key(&key) {
             options.validate(device)?;
             let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -254,9 +313,9 @@ fn create_pipeline(
     shader: &wgpu::ShaderModule,
     layout: &wgpu::PipelineLayout,
     technique: Technique,
-    key: &(u32, bool, PipelineOptions),
+    key: &(u32, Variant, PipelineOptions),
 ) -> wgpu::RenderPipeline {
-    let (index, depth_offset, o) = key;
+    let (index, variant, o) = key;
     let constants = [("TECHNIQUE", f64::from(*index)), ("REVERSE_Z", if o.reverse_z() { 1.0 } else { 0.0 })];
     let target = |format| wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL };
     // Without AOVs the pipeline has one target, so it fits a pass with one attachment (the
@@ -279,7 +338,12 @@ fn create_pipeline(
             })
         })
         .collect();
-    let label = format!("pomkit {}{}", technique.name(), if *depth_offset { " +pdo" } else { "" });
+    let label = format!(
+        "pomkit {}{}{}",
+        technique.name(),
+        if variant.pixel_depth_offset { " +pdo" } else { "" },
+        if variant.silhouette { " +silhouette" } else { "" }
+    );
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(&label),
         layout: Some(layout),
@@ -305,7 +369,7 @@ fn create_pipeline(
         multisample: wgpu::MultisampleState { count: o.sample_count, ..Default::default() },
         fragment: Some(wgpu::FragmentState {
             module: shader,
-            entry_point: Some(if *depth_offset { "fs_main_depth" } else { "fs_main" }),
+            entry_point: Some(variant.entry_point()),
             compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
             targets: &color_targets,
         }),
@@ -419,6 +483,10 @@ pub struct GpuMaterial {
     pub technique: Technique,
     /// Whether it writes pixel depth offset (selects the `frag_depth` pipeline).
     pub pixel_depth_offset: bool,
+    /// Whether it draws silhouettes (selects the discarding pipeline): the material asks for
+    /// them and has a height map and a displacing technique. Meshes then need the curvature
+    /// attribute ([`GpuMesh::with_curvature`]).
+    pub silhouette: bool,
     /// The height field's GPU textures (mips, normals, parallax map, pyramid), if it has one.
     pub height: Option<HeightMaps>,
     height_options: HeightPassOptions,
@@ -521,9 +589,11 @@ impl GpuMaterial {
                 wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::Sampler(&sampler) },
             ],
         });
+        let silhouette = material.silhouette && height.is_some() && technique.displaces();
         Ok(Self {
             technique,
             pixel_depth_offset: material.pixel_depth_offset,
+            silhouette,
             height,
             height_options,
             uniforms,
@@ -634,6 +704,7 @@ impl GpuMaterial {
         Ok(Self {
             technique,
             pixel_depth_offset: material.pixel_depth_offset,
+            silhouette: material.silhouette && technique.displaces(),
             height: None,
             height_options: height.options().pass_options(),
             uniforms,
@@ -797,15 +868,27 @@ pub struct GpuMesh {
 
 impl GpuMesh {
     /// Uploads `mesh`; `depths`, when given, is each vertex's depth below the polygon (for
-    /// `displaced` geometry), else 0.
+    /// `displaced` geometry), else 0. The curvature attribute is 0 (flat): see
+    /// [`GpuMesh::with_curvature`].
     #[must_use]
     pub fn new(ctx: &GpuContext, mesh: &Mesh, depths: Option<&[f32]>) -> Self {
+        Self::with_curvature(ctx, mesh, depths, None)
+    }
+
+    /// [`GpuMesh::new`] with each vertex's curvature form for silhouettes
+    /// (`pomkit_core::silhouette::vertex_curvature` of the mesh as drawn in the world; rotation
+    /// and uniform scale leave it unchanged).
+    #[must_use]
+    pub fn with_curvature(ctx: &GpuContext, mesh: &Mesh, depths: Option<&[f32]>, curvature: Option<&[Vec3]>) -> Self {
         let mut data = Vec::with_capacity(mesh.positions.len() * VERTEX_FLOATS);
         for i in 0..mesh.positions.len() {
             let (p, n, t, uv, s) =
                 (mesh.positions[i], mesh.normals[i], mesh.tangents[i], mesh.uvs[i], mesh.uv_scale[i]);
             let d = depths.and_then(|d| d.get(i)).copied().unwrap_or(0.0);
-            data.extend_from_slice(&[p.x, p.y, p.z, n.x, n.y, n.z, t.x, t.y, t.z, t.w, uv.x, uv.y, s.x, s.y, d]);
+            let k = curvature.and_then(|k| k.get(i)).copied().unwrap_or(Vec3::ZERO);
+            data.extend_from_slice(&[
+                p.x, p.y, p.z, n.x, n.y, n.z, t.x, t.y, t.z, t.w, uv.x, uv.y, s.x, s.y, d, k.x, k.y, k.z,
+            ]);
         }
         let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
         let vertices = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -25,17 +25,23 @@ pub enum AttributeKind {
     /// Depth of the vertex below the polygon (pomkit's `displaced` geometry), `Float32`;
     /// location 5. Optional, and only with [`AttributeKind::UvScale`].
     Depth,
+    /// The surface's curvature form `K = L * II` in the vertex's (T, B) basis
+    /// (`pomkit_core::silhouette::vertex_curvature`), `Float32x3`; location 6. Optional, and
+    /// only with [`AttributeKind::UvScale`]; read by materials with silhouettes (without it
+    /// they see a flat surface: only clamped charts cut the outline).
+    Curvature,
 }
 
 impl AttributeKind {
     /// Every kind, in shader-location order.
-    pub const ALL: [AttributeKind; 6] = [
+    pub const ALL: [AttributeKind; 7] = [
         AttributeKind::Position,
         AttributeKind::Normal,
         AttributeKind::Tangent,
         AttributeKind::Uv,
         AttributeKind::UvScale,
         AttributeKind::Depth,
+        AttributeKind::Curvature,
     ];
 
     /// The shader location.
@@ -48,6 +54,7 @@ impl AttributeKind {
             AttributeKind::Uv => 3,
             AttributeKind::UvScale => 4,
             AttributeKind::Depth => 5,
+            AttributeKind::Curvature => 6,
         }
     }
 
@@ -55,7 +62,7 @@ impl AttributeKind {
     #[must_use]
     pub const fn format(self) -> wgpu::VertexFormat {
         match self {
-            AttributeKind::Position | AttributeKind::Normal => wgpu::VertexFormat::Float32x3,
+            AttributeKind::Position | AttributeKind::Normal | AttributeKind::Curvature => wgpu::VertexFormat::Float32x3,
             AttributeKind::Tangent => wgpu::VertexFormat::Float32x4,
             AttributeKind::Uv | AttributeKind::UvScale => wgpu::VertexFormat::Float32x2,
             AttributeKind::Depth => wgpu::VertexFormat::Float32,
@@ -78,6 +85,7 @@ impl AttributeKind {
             AttributeKind::Uv => "uv",
             AttributeKind::UvScale => "uv scale",
             AttributeKind::Depth => "depth",
+            AttributeKind::Curvature => "curvature",
         }
     }
 }
@@ -109,8 +117,8 @@ pub struct VertexLayout {
 }
 
 impl VertexLayout {
-    /// pomkit's own layout ([`crate::GpuMesh`]): one buffer of 15 floats per vertex, position,
-    /// normal, tangent, uv, uv scale, depth.
+    /// pomkit's own layout ([`crate::GpuMesh`]): one buffer of 18 floats per vertex, position,
+    /// normal, tangent, uv, uv scale, depth, curvature.
     #[must_use]
     pub fn pomkit() -> Self {
         Self::interleaved(&AttributeKind::ALL)
@@ -183,6 +191,9 @@ impl VertexLayout {
                 "a depth attribute without a uv scale attribute: give both (pomkit's own layout) or neither".into()
             );
         }
+        if self.has(AttributeKind::Curvature) && !self.has(AttributeKind::UvScale) {
+            return err("a curvature attribute without a uv scale attribute: silhouettes need both".into());
+        }
         for (slot, b) in self.buffers.iter().enumerate() {
             if b.attributes.is_empty() {
                 return err(format!("vertex buffer {slot} holds no attribute"));
@@ -213,9 +224,12 @@ impl VertexLayout {
 
     /// The vertex entry point of `render.wgsl` that reads this layout.
     pub(crate) fn entry_point(&self) -> &'static str {
-        match (self.has(AttributeKind::UvScale), self.has(AttributeKind::Depth)) {
-            (true, true) => "vs_main",
-            (true, false) => "vs_scaled",
+        let has = |k| self.has(k);
+        match (has(AttributeKind::UvScale), has(AttributeKind::Depth), has(AttributeKind::Curvature)) {
+            (true, true, true) => "vs_main",
+            (true, true, false) => "vs_depth",
+            (true, false, true) => "vs_scaled_curved",
+            (true, false, false) => "vs_scaled",
             _ => "vs_basic",
         }
     }

@@ -119,6 +119,7 @@ pub enum ProbeError {
 pub struct RayProbe {
     layout: wgpu::BindGroupLayout,
     trace: wgpu::ComputePipeline,
+    curved: wgpu::ComputePipeline,
     shadow: wgpu::ComputePipeline,
     repeat: wgpu::Sampler,
     clamp: wgpu::Sampler,
@@ -211,6 +212,7 @@ impl RayProbe {
         };
         Self {
             trace: pipeline("trace_main"),
+            curved: pipeline("curved_main"),
             shadow: pipeline("shadow_main"),
             layout,
             repeat: sampler(wgpu::AddressMode::Repeat),
@@ -252,6 +254,44 @@ impl RayProbe {
         }
         let out = self.run(ctx, maps, params, &self.trace, &records)?;
         Ok(out.into_iter().map(|(uv, depth, fetches)| Hit { uv, depth, fetches }).collect())
+    }
+
+    /// Traces every ray with `pomkit_trace_curved` under a surface of curvature `c` along it
+    /// (the pair's second member; see `pomkit_core::silhouette::trace_curved`): per ray, the hit
+    /// (depth below the curved surface) and whether the ray left the relief. `maps` as for
+    /// [`RayProbe::trace`].
+    ///
+    /// # Errors
+    /// As [`RayProbe::trace`], and for a NaN or infinite curvature.
+    pub fn trace_curved(
+        &self,
+        ctx: &GpuContext,
+        maps: &HeightMaps,
+        params: &PomkitParams,
+        rays: &[(ProbeRay, f32)],
+    ) -> Result<Vec<(Hit, bool)>, ProbeError> {
+        let mut records = Vec::with_capacity(rays.len());
+        for (index, (r, c)) in rays.iter().enumerate() {
+            let bad = |field: &'static str, value: String| ProbeError::NotFinite { what: "ray", index, field, value };
+            if !r.uv.is_finite() {
+                return Err(bad("uv", format!("{}", r.uv)));
+            }
+            if !r.dir.is_finite() {
+                return Err(bad("dir", format!("{}", r.dir)));
+            }
+            if !r.lod.is_finite() {
+                return Err(bad("lod", format!("{}", r.lod)));
+            }
+            if !c.is_finite() {
+                return Err(bad("curvature", format!("{c}")));
+            }
+            records.push([r.uv.x, r.uv.y, r.lod, 0.0, r.dir.x, r.dir.y, r.dir.z, *c]);
+        }
+        let out = self.run(ctx, maps, params, &self.curved, &records)?;
+        Ok(out
+            .into_iter()
+            .map(|(uv, depth, fetches)| (Hit { uv, depth, fetches: fetches & 0x7fff_ffff }, fetches >> 31 == 1))
+            .collect())
     }
 
     /// The light's visibility from every query point with `pomkit_shadow` in

@@ -8,7 +8,8 @@
 // They are turned back into tangent space (T, B, N) = (x, -y, z) and set up by the library's own
 // `pomkit_view_ray` / `pomkit_light_ray` (UV scale 1), so those functions are on trial too.
 
-/// One ray: a = (u, v, lod, receiver depth), b = (direction in ray terms, unused).
+/// One ray: a = (u, v, lod, receiver depth), b = (direction in ray terms, curvature along the
+/// ray for `curved_main`).
 struct ProbeIn {
     a: vec4<f32>,
     b: vec4<f32>,
@@ -43,6 +44,20 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>) {
     let ray = pomkit_view_ray(probe_tangent(r.b.xyz), vec2<f32>(1.0));
     let hit = pomkit_trace(probe_params.technique, probe_heights, probe_pyramid, probe_sampler, probe_params, r.a.xy, ray, r.a.z);
     probe_out[i] = ProbeOut(hit.uv, hit.depth, hit.fetches);
+}
+
+/// `pomkit_trace_curved`: the value is the hit's depth below the curved surface; the fetches'
+/// top bit says the ray left the relief.
+@compute @workgroup_size(64)
+fn curved_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= arrayLength(&probe_in) {
+        return;
+    }
+    let r = probe_in[i];
+    let ray = pomkit_view_ray(probe_tangent(r.b.xyz), vec2<f32>(1.0));
+    let c = pomkit_trace_curved(probe_params.technique, probe_heights, probe_pyramid, probe_sampler, probe_params, r.a.xy, ray, r.a.z, r.b.w);
+    probe_out[i] = ProbeOut(c.hit.uv, c.hit.depth, c.hit.fetches | select(0u, 0x80000000u, c.left));
 }
 
 @compute @workgroup_size(64)

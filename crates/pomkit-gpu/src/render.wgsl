@@ -86,6 +86,29 @@ struct VertexIn {
     @location(4) uv_scale: vec2<f32>,
     // Depth of the vertex below the polygon (non-zero only for `displaced` geometry).
     @location(5) depth: f32,
+    // The surface's curvature form K = L * II in the vertex's (T, B) basis, for silhouettes
+    // (pomkit_core::silhouette::vertex_curvature); zero where the mesh carries none.
+    @location(6) curvature: vec3<f32>,
+}
+
+// A host's vertices with a UV scale and a displacement depth but no curvature.
+struct VertexDepth {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) tangent: vec4<f32>,
+    @location(3) uv: vec2<f32>,
+    @location(4) uv_scale: vec2<f32>,
+    @location(5) depth: f32,
+}
+
+// A host's vertices with a UV scale and a curvature but no displacement depth.
+struct VertexScaledCurved {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) tangent: vec4<f32>,
+    @location(3) uv: vec2<f32>,
+    @location(4) uv_scale: vec2<f32>,
+    @location(6) curvature: vec3<f32>,
 }
 
 // A host's vertices (`VertexLayout`): no UV scale, which the fragment stage then derives from
@@ -124,6 +147,8 @@ struct VertexOut {
     @location(8) light_ts1: vec3<f32>,
     @location(9) light_ts2: vec3<f32>,
     @location(10) light_ts3: vec3<f32>,
+    // K = L * II, interpolated (rotation and uniform scale leave it unchanged).
+    @location(11) curvature: vec3<f32>,
 }
 
 fn light_vector(i: u32, world: vec3<f32>) -> vec3<f32> {
@@ -155,6 +180,7 @@ fn vertex(v: VertexIn) -> VertexOut {
     );
     out.uv_scale = v.uv_scale * stretch;
     out.depth = v.depth;
+    out.curvature = v.curvature;
     out.view_ts = pomkit_to_tangent(f, world - frame.eye.xyz);
     var ls = array<vec3<f32>, 4>();
     for (var i = 0u; i < MAX_LIGHTS; i++) {
@@ -173,13 +199,23 @@ fn vs_main(v: VertexIn) -> VertexOut {
 }
 
 @vertex
+fn vs_depth(v: VertexDepth) -> VertexOut {
+    return vertex(VertexIn(v.position, v.normal, v.tangent, v.uv, v.uv_scale, v.depth, vec3<f32>(0.0)));
+}
+
+@vertex
 fn vs_basic(v: VertexBasic) -> VertexOut {
-    return vertex(VertexIn(v.position, v.normal, v.tangent, v.uv, vec2<f32>(0.0), 0.0));
+    return vertex(VertexIn(v.position, v.normal, v.tangent, v.uv, vec2<f32>(0.0), 0.0, vec3<f32>(0.0)));
 }
 
 @vertex
 fn vs_scaled(v: VertexScaled) -> VertexOut {
-    return vertex(VertexIn(v.position, v.normal, v.tangent, v.uv, v.uv_scale, 0.0));
+    return vertex(VertexIn(v.position, v.normal, v.tangent, v.uv, v.uv_scale, 0.0, vec3<f32>(0.0)));
+}
+
+@vertex
+fn vs_scaled_curved(v: VertexScaledCurved) -> VertexOut {
+    return vertex(VertexIn(v.position, v.normal, v.tangent, v.uv, v.uv_scale, 0.0, v.curvature));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -265,6 +301,8 @@ struct Shading {
     out: FragmentOut,
     // Depth-buffer value after pixel depth offset.
     z: f32,
+    // A silhouette ray that left the relief: the entry point discards the fragment.
+    left: bool,
 }
 
 fn displaces() -> bool {
@@ -284,7 +322,8 @@ fn gradients(in: VertexOut) -> Gradients {
     return Gradients(dpdx(in.uv), dpdy(in.uv), dpdx(in.world), dpdy(in.world));
 }
 
-fn shade(in: VertexOut, g: Gradients) -> Shading {
+/// `silhouette` is a constant at each entry point: without it the curved trace is compiled out.
+fn shade(in: VertexOut, g: Gradients, silhouette: bool) -> Shading {
     let f = pomkit_tangent_frame(in.normal, in.tangent);
     let to_eye = pomkit_safe_normalize(frame.eye.xyz - in.world, f.n);
     var uv_scale = in.uv_scale;
@@ -299,10 +338,32 @@ fn shade(in: VertexOut, g: Gradients) -> Shading {
         weight = pomkit_lod_weight(lod, material.params.lod_threshold);
     }
     var hit = PomkitHit(in.uv, in.depth, 0u);
-    if material.has_height != 0u && weight > 0.0 && displaces() {
+    // How deep the hit lies along the view ray (pixel depth offset): its depth, except under a
+    // curved surface.
+    var ray_depth = in.depth;
+    var left = false;
+    // With silhouettes the ray is traced even where the LOD fade shows normal mapping only: the
+    // outline is decided there too (pomkit-cpu does the same).
+    if material.has_height != 0u && (weight > 0.0 || silhouette) && displaces() {
         let ray = pomkit_view_ray(in.view_ts, uv_scale);
-        hit = pomkit_trace(TECHNIQUE, heights, pyramid, samp, material.params, in.uv, ray, lod);
+        if silhouette {
+            let c = pomkit_view_curvature(in.view_ts, in.curvature, material.params.depth_scale);
+            let curved = pomkit_trace_curved(TECHNIQUE, heights, pyramid, samp, material.params, in.uv, ray, lod, c);
+            hit = curved.hit;
+            ray_depth = curved.ray_depth;
+            left = curved.left;
+        } else {
+            hit = pomkit_trace(TECHNIQUE, heights, pyramid, samp, material.params, in.uv, ray, lod);
+            ray_depth = hit.depth;
+        }
+        let traced = hit.depth;
         hit = pomkit_receiver(TECHNIQUE, heights, samp, hit, lod);
+        // The receiver's lift moves the point up the view ray as well.
+        if silhouette {
+            ray_depth -= traced - hit.depth;
+        } else {
+            ray_depth = hit.depth;
+        }
     }
     let albedo_lod = pomkit_mip_level_sized(g.duv_dx, g.duv_dy, material.albedo_size, material.albedo_max_level);
     let shadows = displaces() || (material.has_height != 0u && TECHNIQUE != POMKIT_FLAT);
@@ -318,20 +379,32 @@ fn shade(in: VertexOut, g: Gradients) -> Shading {
     }
     var z = in.clip.z;
     // Pixel depth offset: move the depth to the traced point along the view ray.
-    if material.pixel_depth_offset != 0u && hit.depth > 0.0 && weight > 0.0 && displaces() {
-        let p = pomkit_hit_position(in.world, to_eye, f.n, hit.depth, material.params.depth_scale, uv_scale);
+    if material.pixel_depth_offset != 0u && ray_depth > 0.0 && weight > 0.0 && displaces() {
+        let p = pomkit_hit_position(in.world, to_eye, f.n, ray_depth, material.params.depth_scale, uv_scale);
         z = pomkit_pixel_depth(p, frame.depth_proj, in.clip.z, REVERSE_Z);
     }
     var out: FragmentOut;
     out.color = vec4<f32>(color, 1.0);
     out.aov0 = vec4<f32>(hit.uv, hit.depth, full.vis);
     out.aov1 = vec4<f32>(f32(hit.fetches + full.fetches), lod, 1.0, 0.0);
-    return Shading(out, z);
+    return Shading(out, z, left);
 }
 
 @fragment
 fn fs_main(in: VertexOut) -> FragmentOut {
-    return shade(in, gradients(in)).out;
+    return shade(in, gradients(in), false).out;
+}
+
+/// Materials with silhouettes: a ray that leaves the relief discards the fragment (a separate
+/// entry point, so that pipelines without silhouettes have no `discard`, which can turn off
+/// early depth testing).
+@fragment
+fn fs_silhouette(in: VertexOut) -> FragmentOut {
+    let s = shade(in, gradients(in), true);
+    if s.left {
+        discard;
+    }
+    return s.out;
 }
 
 struct FragmentOutDepth {
@@ -345,6 +418,16 @@ struct FragmentOutDepth {
 /// early depth testing, so it is a separate pipeline).
 @fragment
 fn fs_main_depth(in: VertexOut) -> FragmentOutDepth {
-    let s = shade(in, gradients(in));
+    let s = shade(in, gradients(in), false);
+    return FragmentOutDepth(s.out.color, s.out.aov0, s.out.aov1, s.z);
+}
+
+/// Silhouettes with pixel depth offset: discarded fragments write no depth.
+@fragment
+fn fs_silhouette_depth(in: VertexOut) -> FragmentOutDepth {
+    let s = shade(in, gradients(in), true);
+    if s.left {
+        discard;
+    }
     return FragmentOutDepth(s.out.color, s.out.aov0, s.out.aov1, s.z);
 }

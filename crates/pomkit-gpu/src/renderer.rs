@@ -7,8 +7,12 @@ use pomkit_core::bake::NormalFilter;
 use pomkit_core::render::{Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve, validate};
 use pomkit_core::scene::Scene;
 
-use crate::material::{AOV_FORMATS, FrameUniforms, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets};
+use crate::material::{
+    AOV_FORMATS, FrameUniforms, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets, Variant,
+};
+use crate::pipeline::PipelineOptions;
 use crate::{GpuContext, GpuError};
+use pomkit_core::silhouette::vertex_curvature;
 
 /// Why a GPU render could not run.
 #[derive(Debug, thiserror::Error)]
@@ -177,13 +181,18 @@ impl GpuRenderer {
                 _ => None,
             };
             check_mesh(&ctx.device.limits(), &obj.name, world.positions.len() as u64, world.indices.len() as u64)?;
-            let gpu_mesh = GpuMesh::new(ctx, &world, depths.as_deref());
+            // Silhouettes need the curvature of the surface as drawn (the CPU renderer
+            // estimates it on the same world mesh).
+            let curvature = materials[obj.material].silhouette.then(|| vertex_curvature(&world));
+            let gpu_mesh = GpuMesh::with_curvature(ctx, &world, depths.as_deref(), curvature.as_deref());
             objects.push((obj.material, gpu_mesh, GpuObject::new(ctx, &self.pipelines, Mat4::IDENTITY)));
         }
 
         let targets = Targets { color: COLOR, aovs: true, depth: DEPTH };
-        for (mat, gm) in scene.materials.iter().zip(&materials) {
-            self.pipelines.pipeline(&ctx.device, gm.technique, mat.pixel_depth_offset, targets);
+        for gm in &materials {
+            self.pipelines
+                .pipeline_variant(&ctx.device, gm.technique, Variant::of(gm), &PipelineOptions::from(targets))
+                .map_err(|e| GpuError::Unsupported(e.to_string()))?;
         }
         let dirty = vec![true; materials.len()];
         Ok(GpuScene { frame, materials, objects, dirty, width: w, height: h, ss, aovs: opts.aovs })
@@ -300,7 +309,8 @@ impl GpuRenderer {
             pass.set_bind_group(0, &gs.frame.bind_group, &[]);
             for (mi, mesh, object) in objects {
                 let gm = &materials[*mi];
-                let Some(pipeline) = self.pipelines.cached(gm.technique, gm.pixel_depth_offset, targets) else {
+                let options = PipelineOptions::from(targets);
+                let Some(pipeline) = self.pipelines.cached_variant(gm.technique, Variant::of(gm), &options) else {
                     continue;
                 };
                 pass.set_pipeline(pipeline);

@@ -278,6 +278,30 @@ fn dynamic_height_field_matches_the_cpu_frame_after_frame() {
     assert!(gs.set_height(r.context(), 3, &ripple(0)).is_err());
 }
 
+/// McGuire 2005's fur and grass (examples/scenes/fur.toml, docs/REFERENCES.md): steep parallax
+/// over the built-in fur and grass maps with depth shadows, and the same scene with pom and
+/// exact, agree with the CPU within the usual tolerance. The maps are 128x128 instead of 512x512
+/// for speed.
+#[test]
+fn fur_scene_matches_the_cpu() {
+    let Some(g) = gpu() else { return };
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/scenes");
+    let text = std::fs::read_to_string(dir.join("fur.toml")).expect("examples/scenes/fur.toml");
+    assert_eq!(text.matches(":512x512\"").count(), 4, "fur.toml's four built-in maps are 512x512");
+    let scene = pomkit_io::scene::parse_scene(&text.replace(":512x512\"", ":128x128\""), &dir).expect("fur.toml loads");
+    assert!(scene.materials.iter().all(|m| m.shadow.mode == ShadowMode::Depth && m.technique == Technique::Steep));
+    for mode in [Mode::Material, Mode::Technique(Technique::Pom), Mode::Technique(Technique::Exact)] {
+        let o = opts(256, 144, mode);
+        let (gpu_out, cpu_out) = (render_gpu(g, &scene, &o), render_cpu(&scene, &o));
+        assert_agree(&gpu_out, &cpu_out, &format!("fur scene {mode:?}"));
+        // Depth shadows darken what lies deep: the first light's visibility spans the range.
+        // (Covered pixels: those with a hit UV.)
+        let aovs = cpu_out.aovs.as_ref().expect("AOVs");
+        let dark = aovs.shadow.iter().zip(&aovs.uv).filter(|&(&v, uv)| *uv != Vec2::ZERO && v < 0.5).count();
+        assert!(dark > cpu_out.covered / 20, "fur scene {mode:?}: only {dark} pixels darker than 0.5");
+    }
+}
+
 #[test]
 fn bad_input_is_an_error_not_a_panic() {
     let Some(g) = gpu() else { return };
@@ -302,4 +326,37 @@ fn bad_input_is_an_error_not_a_panic() {
         m.trace.samples = u32::MAX;
     });
     assert!(r.render(&huge, &opts(32, 18, Mode::Technique(Technique::Pom))).is_ok());
+}
+
+#[path = "../../pomkit-cpu/tests/support/silhouettes.rs"]
+mod silhouettes;
+
+/// Silhouettes on the GPU: the outline disagreement with the displaced truth drops by at least
+/// 70% on a cobblestone sphere and a pyramid torus (as on the CPU, pomkit-cpu/tests/silhouette.rs),
+/// and the silhouette picture agrees with the CPU renderer's within the usual tolerance.
+#[test]
+fn silhouettes_cut_the_outline_disagreement_and_match_the_cpu() {
+    use silhouettes::{Shape, coverage, disagreement, scene};
+    let Some(g) = gpu() else { return };
+    let o = RenderOptions { width: 400, height: 400, displaced_edge_texels: 1.0, ..Default::default() };
+    for shape in [Shape::CobblestoneSphere, Shape::PyramidTorus] {
+        let truth = coverage(&render_cpu(
+            &scene(shape, Technique::Pom, false, 256),
+            &RenderOptions { mode: Mode::Displaced, ..o },
+        ));
+        for technique in [Technique::Pom, Technique::Exact] {
+            let before = disagreement(&coverage(&render_gpu(g, &scene(shape, technique, false, 256), &o)), &truth);
+            let with = scene(shape, technique, true, 256);
+            let gpu_out = render_gpu(g, &with, &o);
+            let after = disagreement(&coverage(&gpu_out), &truth);
+            println!("GPU {shape:?} {technique}: {before} -> {after} pixels disagree with the displaced outline");
+            assert!(before > 4000, "{shape:?} {technique}: only {before} pixels disagree without silhouettes");
+            assert!((after as f64) <= 0.3 * before as f64, "{shape:?} {technique}: {before} -> {after}, less than 70%");
+            let cpu_out = render_cpu(&with, &o);
+            let between = disagreement(&coverage(&gpu_out), &coverage(&cpu_out));
+            println!("GPU and CPU silhouettes: {between} pixels of coverage differ");
+            assert!(between <= 2 + cpu_out.covered / 200, "{shape:?} {technique}: {between} pixels of coverage differ");
+            assert_agree(&gpu_out, &cpu_out, &format!("silhouettes {shape:?} {technique}"));
+        }
+    }
 }

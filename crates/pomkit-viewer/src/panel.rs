@@ -51,7 +51,7 @@ pub struct Param {
 
 const TECHNIQUES: [&str; 9] =
     ["flat", "normal", "parallax", "iterative", "steep", "pom-classic", "pom", "relief", "exact"];
-const SHADOWS: [&str; 4] = ["none", "hard", "soft", "exact"];
+const SHADOWS: [&str; 5] = ["none", "hard", "soft", "exact", "depth"];
 
 /// The technique and its parameters, in panel order.
 pub const TECHNIQUE_PARAMS: [Param; 9] = [
@@ -129,7 +129,7 @@ pub const TECHNIQUE_PARAMS: [Param; 9] = [
 ];
 
 /// Shadows, LOD, input conventions and shading, in panel order.
-pub const OTHER_PARAMS: [Param; 11] = [
+pub const OTHER_PARAMS: [Param; 12] = [
     Param {
         key: "shadow",
         label: "Shadow",
@@ -137,7 +137,9 @@ pub const OTHER_PARAMS: [Param; 11] = [
         doc: "Self-shadowing of the relief by the first light.\n\
               none: only N.L.\nhard: any height sample above the light ray shadows (Brawley 2004).\n\
               soft: Tatarchuk 2006's penumbra estimate, softened by `softness`.\n\
-              exact: the exact tracer along the light ray.",
+              exact: the exact tracer along the light ray.\n\
+              depth: no shadow ray, darker the deeper the point (1 - depth), for fur and grass \
+              (McGuire 2005 after Lengyel et al. 2001).",
     },
     Param {
         key: "softness",
@@ -206,6 +208,14 @@ pub const OTHER_PARAMS: [Param; 11] = [
         doc: "Write the displaced depth to the depth buffer, so that displaced surfaces meet other geometry \
               where the real surface would (costs early-z).",
     },
+    Param {
+        key: "silhouette",
+        label: "Silhouettes",
+        kind: Kind::Bool,
+        doc: "Trace under the curved surface of the mesh and discard pixels whose ray leaves the relief: curved \
+              meshes get a bumpy, displaced outline instead of the smooth one (with clamped edges, rays that \
+              leave the texture are discarded too). Free when off.",
+    },
 ];
 
 /// The value a material has when the scene file leaves `key` out.
@@ -233,6 +243,7 @@ pub fn default_value(key: &str) -> Value {
         "specular" => f(m.specular),
         "shininess" => f(m.shininess),
         "pixel_depth_offset" => Value::Boolean(m.pixel_depth_offset),
+        "silhouette" => Value::Boolean(m.silhouette),
         _ => Value::Boolean(false),
     }
 }
@@ -265,7 +276,11 @@ pub fn applies(doc: &SceneDoc, key: &str) -> Result<(), &'static str> {
         "binary_steps" if t != Technique::Relief => Err("used by relief"),
         "refine" if t != Technique::Pom => Err("used by pom"),
         "perspective_bias" if t != Technique::PomClassic => Err("used by pom-classic"),
+        "softness" if shadow == ShadowMode::Depth => {
+            Err("used by soft shadows; depth shadows darken by depth alone and trace no light ray")
+        }
         "softness" if shadow != ShadowMode::Soft => Err("used by soft shadows"),
+        "silhouette" if !has_height || !t.displaces() => Err("needs a height map and a displacing technique"),
         "normal_y_down" if !has_normal => Err("needs a normal map file (without one, it is baked from the height)"),
         _ => Ok(()),
     }
@@ -453,6 +468,7 @@ mod tests {
         assert_eq!(a.shadow, b.shadow);
         assert_eq!((a.lod_threshold, a.specular, a.shininess), (b.lod_threshold, b.specular, b.shininess));
         assert_eq!(a.pixel_depth_offset, b.pixel_depth_offset);
+        assert_eq!(a.silhouette, b.silhouette);
     }
 
     #[test]
@@ -468,5 +484,10 @@ mod tests {
         assert!(applies(&doc, "min_samples").is_ok(), "soft shadows use the pom bounds");
         assert!(applies(&doc, "softness").is_ok());
         assert!(applies(&doc, "normal_y_down").is_err());
+        // Depth shadows trace no light ray: neither softness nor the sample bounds matter.
+        doc.set_material_field("shadow", Some(Value::String("depth".into())));
+        assert!(applies(&doc, "softness").is_err_and(|why| why.contains("depth")));
+        assert!(applies(&doc, "min_samples").is_err());
+        assert!(applies(&doc, "shadow").is_ok());
     }
 }

@@ -7,6 +7,7 @@ use eframe::egui::{self, Pos2};
 use egui_kittest::Harness;
 use egui_kittest::kittest::{NodeT, Queryable};
 use pomkit_core::glam::Vec3;
+use pomkit_core::shadow::ShadowMode;
 use pomkit_core::trace::Technique;
 use pomkit_io::scene::SceneCache;
 use pomkit_viewer::SceneDoc;
@@ -90,6 +91,31 @@ fn every_technique_in_the_list_reaches_the_scene() {
         let scene = harness.state().build(&mut SceneCache::default()).expect("the edited scene builds");
         assert_eq!(scene.materials[0].technique.name(), name);
     }
+}
+
+/// Every shadow mode of pomkit-core is in the list, and choosing it reaches the scene; under
+/// `depth` (no light ray) the softness is greyed out, with the reason in its tooltip.
+#[test]
+fn every_shadow_mode_in_the_list_reaches_the_scene() {
+    let mut harness = panel(&OTHER_PARAMS, SceneDoc::default());
+    let Kind::Choice(names) = OTHER_PARAMS[0].kind else { panic!("the shadow is a choice") };
+    assert_eq!(names, ShadowMode::ALL.map(ShadowMode::name).as_slice(), "the list is pomkit-core's modes");
+    for &name in names {
+        control(&harness, "Shadow").click();
+        harness.run();
+        harness.get_by_label(name).click();
+        harness.run();
+        let scene = harness.state().build(&mut SceneCache::default()).expect("the edited scene builds");
+        assert_eq!(scene.materials[0].shadow.mode.name(), name);
+        assert_eq!(disabled(&control(&harness, "Softness")), name != "soft", "softness under {name}");
+    }
+    assert_eq!(harness.state().material_field("shadow"), Some(&string("depth")));
+    control(&harness, "Softness").hover();
+    harness.run();
+    assert!(
+        !tooltips_containing(&harness, "depth shadows darken by depth alone").is_empty(),
+        "the greyed-out softness says why"
+    );
 }
 
 #[test]
