@@ -1,11 +1,12 @@
-//! `pomkit bake normal|parallax|pack`: maps baked from a height map.
+//! `pomkit bake normal|parallax|pack|maxmip|cone`: maps baked from a height map.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use pomkit_core::bake::{self, NormalBakeOptions, NormalFilter};
-use pomkit_core::{EdgeMode, HeightField};
+use pomkit_core::cone::ConeMap;
+use pomkit_core::{EdgeMode, HeightField, MaxHeightPyramid};
 use pomkit_io::output::{OutputId, Outputs};
 use pomkit_io::{PixelLayout, Pixels};
 
@@ -20,6 +21,14 @@ pub enum BakeVerb {
     Parallax(ParallaxArgs),
     /// Normal in RGB and height (white = high) in alpha, as one RGBA8 PNG.
     Pack(PackArgs),
+    /// The maximum-height pyramid (what `exact` walks) as one 16-bit grey PNG: level 0 on the
+    /// left, the coarser levels stacked to its right; each cell the greatest height of the
+    /// bilinear surface over it, rounded up.
+    Maxmip(MapArgs),
+    /// Conservative cone map (Dummer 2006, robust to the bilinear surface) as a 16-bit grey +
+    /// alpha PNG: grey the top of each texel footprint as a height, alpha sqrt(cone ratio /
+    /// shorter side in texels).
+    Cone(MapArgs),
 }
 
 /// The height maps to bake and how to read them.
@@ -149,6 +158,27 @@ pub struct PackArgs {
     y_down: bool,
 }
 
+/// `bake maxmip` and `bake cone`: maps of the bilinear surface itself.
+#[derive(Args, Debug)]
+pub struct MapArgs {
+    #[command(flatten)]
+    input: BakeInputs,
+    /// Output PNG. With several inputs, a folder.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Border texels: wrap (tiling textures) or clamp. Decides the surface between the border
+    /// texels and, for cones, which relief lies beyond the edge.
+    #[arg(long, value_enum, default_value_t = EdgesArg::Wrap)]
+    edges: EdgesArg,
+}
+
+impl MapArgs {
+    /// The slope options a [`Job`] carries: only the edges matter to these maps.
+    fn slope(&self) -> SlopeArgs {
+        SlopeArgs { scale: 8.0, filter: FilterArg::Central, edges: self.edges }
+    }
+}
+
 /// What to bake from one height map: the verb and its per-file options (the command line's,
 /// or a batch config's overrides of them).
 #[derive(Clone, Debug)]
@@ -172,6 +202,10 @@ pub(crate) enum Kind {
     Parallax(ParallaxEncoding),
     /// `bake pack`.
     Pack,
+    /// `bake maxmip`.
+    Maxmip,
+    /// `bake cone`.
+    Cone,
 }
 
 impl Kind {
@@ -181,6 +215,8 @@ impl Kind {
             Kind::Normal(_) => "normal",
             Kind::Parallax(_) => "parallax",
             Kind::Pack => "pack",
+            Kind::Maxmip => "maxmip",
+            Kind::Cone => "cone",
         }
     }
 
@@ -192,6 +228,8 @@ impl Kind {
             Kind::Parallax(ParallaxEncoding::R8) => PixelLayout::Gray8,
             Kind::Parallax(ParallaxEncoding::Float) => PixelLayout::GrayF32,
             Kind::Pack => PixelLayout::Rgba8,
+            Kind::Maxmip => PixelLayout::Gray16,
+            Kind::Cone => PixelLayout::GrayAlpha16,
         }
     }
 
@@ -223,6 +261,14 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
             &a.input,
             &a.output,
         ),
+        BakeVerb::Maxmip(a) => (
+            Job { kind: Kind::Maxmip, slope: a.slope(), y_down: false, read: a.input.read.clone() },
+            &a.input,
+            &a.output,
+        ),
+        BakeVerb::Cone(a) => {
+            (Job { kind: Kind::Cone, slope: a.slope(), y_down: false, read: a.input.read.clone() }, &a.input, &a.output)
+        }
     };
     if batch::is_batch(&inputs.inputs, &inputs.batch) {
         return batch::run(&job, &inputs.inputs, &inputs.batch, output);
@@ -234,6 +280,8 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
         }
         Kind::Parallax(encoding) => eprintln!("wrote {} ({w}x{h} parallax map, {encoding:?})", output.display()),
         Kind::Pack => eprintln!("wrote {} ({w}x{h} normal + height map)", output.display()),
+        Kind::Maxmip => eprintln!("wrote {} (maximum-height pyramid of a {w}x{h} map)", output.display()),
+        Kind::Cone => eprintln!("wrote {} ({w}x{h} cone map)", output.display()),
     }
     Ok(())
 }
@@ -308,6 +356,16 @@ pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Re
             let px = bake::bake_packed_rgba8(&field, &opts, &tick)?;
             pb.finish_and_clear();
             outs.write_image(id, w, h, layout, Pixels::U8(px.as_flattened()))?;
+        }
+        Kind::Maxmip => {
+            let pyramid = MaxHeightPyramid::new(&field, opts.edges);
+            let (aw, ah) = pyramid.atlas_size();
+            outs.write_image(id, aw, ah, layout, Pixels::U16(&pyramid.atlas_gray16()))?;
+        }
+        Kind::Cone => {
+            let cones = ConeMap::conservative_with_progress(&field, opts.edges, &tick);
+            pb.finish_and_clear();
+            outs.write_image(id, w, h, layout, Pixels::U16(&cones.to_gray_alpha16()))?;
         }
     }
     outs.commit()?;

@@ -140,6 +140,9 @@ fn bad_input_fails_clearly_and_leaves_no_file() {
         (&["bake", "pack", "builtin:nosuch", "-o", "out.png"], "nosuch"),
         (&["bake", "normal", "builtin:bricks:0x5", "-o", "out.png"], "between 1 and 16384"),
         (&["generate", "marble", "-o", "out.png"], "marble"),
+        (&["bake", "cone", "h.png", "-o", "out.exr"], ".png"),
+        (&["bake", "maxmip", "truncated.png", "-o", "out.png"], "truncated.png"),
+        (&["bake", "cone", "h.png", "-o", "out.png", "--edges", "mirror"], "--edges"),
     ];
     for (args, needle) in cases {
         let out = pomkit(args, dir.path());
@@ -176,6 +179,8 @@ fn every_verb_has_help() {
         &["bake", "normal", "--help"],
         &["bake", "parallax", "--help"],
         &["bake", "pack", "--help"],
+        &["bake", "maxmip", "--help"],
+        &["bake", "cone", "--help"],
         &["generate", "--help"],
     ] {
         let out = pomkit(args, dir.path());
@@ -187,5 +192,118 @@ fn every_verb_has_help() {
     let text = String::from_utf8_lossy(&out.stdout);
     for flag in ["--scale", "--filter", "--edges", "--encoding", "--y-down", "--depth-map", "--channel"] {
         assert!(text.contains(flag), "bake normal --help lacks {flag}");
+    }
+}
+
+/// The bilinear surface of `field` (heights, wrap or clamp) at `(x, y)` in texel units.
+fn surface_height(field: &pomkit_core::HeightField, edges: pomkit_core::EdgeMode, x: f64, y: f64) -> f64 {
+    let uv =
+        pomkit_core::glam::Vec2::new((x / f64::from(field.width())) as f32, (y / f64::from(field.height())) as f32);
+    1.0 - f64::from(field.sample_bilinear(uv, edges))
+}
+
+/// The greatest height of the bilinear surface over texel footprint `(i, j)`, sampled every
+/// 1/8 texel (edges and corners included).
+fn brute_top(field: &pomkit_core::HeightField, edges: pomkit_core::EdgeMode, i: u32, j: u32) -> f64 {
+    (0..=8)
+        .flat_map(|a| (0..=8).map(move |b| (a, b)))
+        .map(|(a, b)| {
+            surface_height(field, edges, f64::from(i) + f64::from(a) / 8.0, f64::from(j) + f64::from(b) / 8.0)
+        })
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+#[test]
+fn maxmip_holds_every_footprints_highest_point_and_each_level_the_highest_of_its_children() {
+    use pomkit_core::EdgeMode;
+    let dir = tempfile::tempdir().unwrap();
+    let out = pomkit(&["bake", "maxmip", "builtin:cobblestones:24x20", "-o", "m.png", "--edges", "clamp"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let img = image::open(dir.path().join("m.png")).unwrap().to_luma16();
+    // Levels 24x20, 12x10, 6x5, 3x3, 2x2, 1x1: level 0 on the left, the others stacked in a
+    // column 12 wide (10 + 5 + 3 + 2 + 1 = 21 rows).
+    assert_eq!(img.dimensions(), (36, 21));
+    let at = |x: u32, y: u32| f64::from(img.get_pixel(x, y).0[0]) / 65535.0;
+    let field = procedural::generate(Pattern::Cobblestones, 24, 20);
+    for j in 0..20 {
+        for i in 0..24 {
+            let truth = brute_top(&field, EdgeMode::Clamp, i, j);
+            assert!(
+                at(i, j) >= truth - 1e-6 && at(i, j) <= truth + 2.0 / 65535.0,
+                "({i},{j}): {} vs {truth}",
+                at(i, j)
+            );
+        }
+    }
+    let sizes = [(24, 20), (12, 10), (6, 5), (3, 3), (2, 2), (1, 1)];
+    let origins = [(0, 0), (24, 0), (24, 10), (24, 15), (24, 18), (24, 20)];
+    for k in 1..sizes.len() {
+        let ((w, h), (ox, oy), (fw, fh), (fx, fy)) = (sizes[k], origins[k], sizes[k - 1], origins[k - 1]);
+        for y in 0..h {
+            for x in 0..w {
+                let children = [(2 * x, 2 * y), (2 * x + 1, 2 * y), (2 * x, 2 * y + 1), (2 * x + 1, 2 * y + 1)];
+                let highest = children
+                    .into_iter()
+                    .filter(|&(cx, cy)| cx < fw && cy < fh)
+                    .map(|(cx, cy)| at(fx + cx, fy + cy))
+                    .fold(0.0, f64::max);
+                assert_eq!(at(ox + x, oy + y), highest, "level {k} cell ({x},{y})");
+            }
+        }
+    }
+}
+
+#[test]
+fn cone_map_cones_hold_no_point_of_the_bilinear_surface() {
+    use pomkit_core::EdgeMode;
+    let dir = tempfile::tempdir().unwrap();
+    for (edges, name) in [(EdgeMode::Wrap, "wrap"), (EdgeMode::Clamp, "clamp")] {
+        let out = pomkit(&["bake", "cone", "builtin:cobblestones:16x12", "-o", "c.png", "--edges", name], dir.path());
+        assert!(out.status.success(), "{}", stderr(&out));
+        let img = image::open(dir.path().join("c.png")).unwrap();
+        assert!(img.color().has_alpha() && img.color().channel_count() == 2, "grey + alpha: {:?}", img.color());
+        let img = img.to_luma_alpha16();
+        assert_eq!(img.dimensions(), (16, 12));
+        let field = procedural::generate(Pattern::Cobblestones, 16, 12);
+        // Surface points every 1/4 texel over the area the cones must respect: the 3 x 3 tiles
+        // around the map for wrap, the map for clamp (beyond it the border repeats).
+        let tiles = if edges == EdgeMode::Wrap { -1..=1 } else { 0..=0 };
+        let mut points = Vec::new();
+        for ty in tiles.clone() {
+            for tx in tiles.clone() {
+                for b in 0..12 * 4 {
+                    for a in 0..16 * 4 {
+                        let (x, y) = (f64::from(tx * 16) + f64::from(a) / 4.0, f64::from(ty * 12) + f64::from(b) / 4.0);
+                        points.push((x, y, surface_height(&field, edges, x, y)));
+                    }
+                }
+            }
+        }
+        let mut shares = Vec::new();
+        for j in 0..12 {
+            for i in 0..16 {
+                let [grey, alpha] = img.get_pixel(i, j).0;
+                let top = f64::from(grey) / 65535.0;
+                let ratio = (f64::from(alpha) / 65535.0).powi(2) * 12.0;
+                assert!(
+                    top >= brute_top(&field, edges, i, j) - 1e-6,
+                    "{name} ({i},{j}): the apex is below the surface"
+                );
+                // The tightest cone the sampled points allow: dist(q, footprint) / (h(q) - top).
+                let mut tightest = 12.0f64;
+                for &(x, y, hq) in &points {
+                    if hq > top + 1e-6 {
+                        let dx = (f64::from(i) - x).max(x - f64::from(i) - 1.0).max(0.0);
+                        let dy = (f64::from(j) - y).max(y - f64::from(j) - 1.0).max(0.0);
+                        tightest = tightest.min(dx.hypot(dy) / (hq - top));
+                    }
+                }
+                assert!(ratio <= tightest + 1e-6, "{name} ({i},{j}): cone {ratio} holds a surface point ({tightest})");
+                shares.push(ratio / tightest);
+            }
+        }
+        let mean = shares.iter().sum::<f64>() / shares.len() as f64;
+        println!("{name}: the cones are {mean:.3} of the widest the sampled surface allows, on average");
+        assert!(mean > 0.8, "{name}: cones only {mean} of the widest");
     }
 }

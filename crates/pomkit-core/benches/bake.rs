@@ -1,11 +1,14 @@
-//! Baking a 4096x4096 normal map, next to a plain copy of the same bytes.
+//! Baking a 4096x4096 normal map, next to a plain copy of the same bytes; and cone maps of
+//! 256x256 built-in maps.
 //!
 //! The copy reads the height field's 64 MiB of f32 depths and writes them to a second buffer;
 //! the bake reads the same depths and writes 48 MiB of RGB8 normals. Run with
 //! `cargo bench -p pomkit-core --bench bake`; figures go in docs/BENCHMARKS.md.
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use pomkit_core::EdgeMode;
 use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals_rgb8};
+use pomkit_core::cone::ConeMap;
 use pomkit_core::procedural::{Pattern, generate};
 use std::hint::black_box;
 
@@ -35,5 +38,19 @@ fn bench_bake(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_bake);
+/// Conservative cone maps (`pomkit_core::cone`) of 256x256 built-in maps, wrap edges: the
+/// branch and bound's cost depends on the relief (smooth slopes cost the most).
+fn bench_cones(c: &mut Criterion) {
+    let mut group = c.benchmark_group("cone_256");
+    group.sample_size(10);
+    for pattern in [Pattern::Cobblestones, Pattern::Bricks, Pattern::Waves] {
+        let field = generate(pattern, 256, 256);
+        group.bench_function(pattern.name(), |b| {
+            b.iter(|| black_box(ConeMap::conservative(black_box(&field), EdgeMode::Wrap)));
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_bake, bench_cones);
 criterion_main!(benches);

@@ -33,6 +33,7 @@
 
 pub mod accuracy;
 pub mod bake;
+pub mod cone;
 pub mod demo;
 pub mod heightfield;
 pub mod memory;

@@ -131,6 +131,53 @@ impl MaxHeightPyramid {
     }
 }
 
+impl MaxHeightPyramid {
+    /// The size of [`MaxHeightPyramid::atlas_gray16`]'s image: level 0 on the left and the
+    /// coarser levels stacked in a column to its right, each at the top of the space left.
+    #[must_use]
+    pub fn atlas_size(&self) -> (u32, u32) {
+        let (w, h) = self.level_size(0);
+        if self.levels.len() == 1 {
+            return (w, h);
+        }
+        let column: u32 = self.levels[1..].iter().map(|l| l.height).sum();
+        (w + self.levels[1].width, h.max(column))
+    }
+
+    /// Where level `level` starts in the atlas: `(x, y)` of its top-left cell.
+    ///
+    /// # Panics
+    /// If `level >= self.len()`.
+    #[must_use]
+    pub fn atlas_origin(&self, level: usize) -> (u32, u32) {
+        assert!(level < self.levels.len(), "level {level} of {}", self.levels.len());
+        if level == 0 {
+            return (0, 0);
+        }
+        (self.base_width, self.levels[1..level].iter().map(|l| l.height).sum())
+    }
+
+    /// The whole pyramid as one 16-bit grey image (row-major, [`MaxHeightPyramid::atlas_size`]),
+    /// as `pomkit bake maxmip` writes it: each cell's greatest height `1 - min_depth`, rounded up
+    /// (so the stored bound stays a bound), white = high; the space no level uses is 0. Level
+    /// `k` starts at [`MaxHeightPyramid::atlas_origin`].
+    #[must_use]
+    pub fn atlas_gray16(&self) -> Vec<u16> {
+        let (aw, ah) = self.atlas_size();
+        let mut out = vec![0u16; aw as usize * ah as usize];
+        for (k, l) in self.levels.iter().enumerate() {
+            let (ox, oy) = self.atlas_origin(k);
+            for y in 0..l.height {
+                for x in 0..l.width {
+                    let height = f64::from(1.0 - l.min_depth[(y * l.width + x) as usize]).clamp(0.0, 1.0);
+                    out[((oy + y) * aw + ox + x) as usize] = (height * 65535.0).ceil() as u16;
+                }
+            }
+        }
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -201,5 +248,34 @@ mod tests {
         assert_eq!(p.cell_texels(1, 2, 1), ([4, 5], [2, 3]));
         assert_eq!(p.level_size(p.len() - 1), (1, 1));
         assert_eq!(p.cell_texels(p.len() - 1, 0, 0), ([0, 5], [0, 3]));
+    }
+
+    #[test]
+    fn the_atlas_holds_every_level_where_it_says_rounded_up() {
+        for (w, h) in [(8, 8), (7, 5), (1, 1), (1, 6)] {
+            let f = noisy(w, h, 7);
+            let p = MaxHeightPyramid::new(&f, EdgeMode::Wrap);
+            let (aw, ah) = p.atlas_size();
+            let atlas = p.atlas_gray16();
+            assert_eq!(atlas.len(), (aw * ah) as usize);
+            let mut used = vec![false; atlas.len()];
+            for level in 0..p.len() {
+                let (ox, oy) = p.atlas_origin(level);
+                let (lw, lh) = p.level_size(level);
+                for y in 0..lh {
+                    for x in 0..lw {
+                        let k = ((oy + y) * aw + ox + x) as usize;
+                        assert!(!used[k], "{w}x{h}: levels overlap at ({}, {})", ox + x, oy + y);
+                        used[k] = true;
+                        let stored = f64::from(atlas[k]) / 65535.0;
+                        let bound = 1.0 - f64::from(p.min_depth(level, x, y));
+                        assert!(stored >= bound - 1e-7 && stored < bound + 1.0 / 65535.0, "{w}x{h} level {level}");
+                    }
+                }
+            }
+            // Level 0 fills the left, the rest a column one level-1 width wide.
+            assert_eq!(aw, if p.len() > 1 { w + p.level_size(1).0 } else { w });
+            assert!(used.iter().zip(&atlas).all(|(&u, &v)| u || v == 0));
+        }
     }
 }

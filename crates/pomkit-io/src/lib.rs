@@ -564,6 +564,8 @@ pub enum PixelLayout {
     Gray8,
     /// One 16-bit channel (PNG).
     Gray16,
+    /// Two 16-bit channels, grey and alpha (PNG).
+    GrayAlpha16,
     /// Three 8-bit channels (PNG).
     Rgb8,
     /// Four 8-bit channels (PNG).
@@ -580,6 +582,7 @@ impl PixelLayout {
     fn channels(self) -> usize {
         match self {
             PixelLayout::Gray8 | PixelLayout::Gray16 | PixelLayout::GrayF32 => 1,
+            PixelLayout::GrayAlpha16 => 2,
             PixelLayout::Rgb8 | PixelLayout::RgbF32 => 3,
             PixelLayout::Rgba8 | PixelLayout::RgbaF32 => 4,
         }
@@ -666,6 +669,12 @@ fn to_image(width: u32, height: u32, layout: PixelLayout, pixels: Pixels<'_>) ->
         (PixelLayout::Gray16, Pixels::U16(p)) => {
             assert_eq!(p.len(), n, "sample count");
             image::ImageBuffer::<image::Luma<u16>, _>::from_raw(width, height, p.to_vec()).expect("size checked").into()
+        }
+        (PixelLayout::GrayAlpha16, Pixels::U16(p)) => {
+            assert_eq!(p.len(), n, "sample count");
+            image::ImageBuffer::<image::LumaA<u16>, _>::from_raw(width, height, p.to_vec())
+                .expect("size checked")
+                .into()
         }
         (PixelLayout::GrayF32, Pixels::F32(p)) => {
             assert_eq!(p.len(), n, "sample count");
