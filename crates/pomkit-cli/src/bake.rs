@@ -358,11 +358,24 @@ pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Re
             outs.write_image(id, w, h, layout, Pixels::U8(px.as_flattened()))?;
         }
         Kind::Maxmip => {
+            // The pyramid (4/3 of the texels in f32) and its atlas (1.5 times the texels in
+            // u16, and the encoder's copy).
+            let needed = u64::from(w) * u64::from(h) * 12;
+            pomkit_core::memory::check(
+                || format!("the maximum-height pyramid of a {w}x{h} map"),
+                needed,
+                "bake a smaller height map",
+            )?;
             let pyramid = MaxHeightPyramid::new(&field, opts.edges);
             let (aw, ah) = pyramid.atlas_size();
             outs.write_image(id, aw, ah, layout, Pixels::U16(&pyramid.atlas_gray16()))?;
         }
         Kind::Cone => {
+            pomkit_core::memory::check(
+                || format!("the cone map of a {w}x{h} map"),
+                ConeMap::build_bytes(w, h),
+                "bake a smaller height map",
+            )?;
             let cones = ConeMap::conservative_with_progress(&field, opts.edges, &tick);
             pb.finish_and_clear();
             outs.write_image(id, w, h, layout, Pixels::U16(&cones.to_gray_alpha16()))?;

@@ -259,3 +259,21 @@ fn a_gpu_frame_over_the_adapters_limits_says_what_to_do() {
         .contains("Validation")
     );
 }
+
+#[test]
+fn cone_and_maxmip_bakes_that_do_not_fit_are_refused_with_the_figure() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiny = ("POMKIT_MEMORY_LIMIT", "1MiB");
+    // 256x256: the cones need about 2 MiB, the pyramid and its atlas about 0.75 MiB.
+    let args = ["bake", "cone", "builtin:bricks:256x256", "-o", "c.png"];
+    refuses_env(
+        &args,
+        dir.path(),
+        &[tiny],
+        &["the cone map of a 256x256 map needs about", "MiB", "smaller height map"],
+    );
+    let out = pomkit_env(&["bake", "maxmip", "builtin:bricks:256x256", "-o", "m.png"], dir.path(), &[tiny]);
+    assert!(out.status.success(), "the pyramid fits: {}", stderr(&out));
+    let args = ["bake", "maxmip", "builtin:bricks:512x512", "-o", "m2.png"];
+    refuses_env(&args, dir.path(), &[tiny], &["maximum-height pyramid of a 512x512 map needs about"]);
+}

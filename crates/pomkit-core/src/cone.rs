@@ -119,6 +119,15 @@ impl ConeMap {
         Self { width: w, height: h, edges, top, ratio }
     }
 
+    /// About how many bytes building the cones of a `width` x `height` map and writing them
+    /// takes beyond the height field itself: the pyramid (5.4 bytes a texel), the rows as they
+    /// are built and the map (8 each), and the 16-bit image and its encoder's copy (4 each),
+    /// rounded up to 32 bytes a texel.
+    #[must_use]
+    pub fn build_bytes(width: u32, height: u32) -> u64 {
+        u64::from(width) * u64::from(height) * 32
+    }
+
     /// Footprints `(columns, rows)`: the height field's size.
     #[must_use]
     pub fn size(&self) -> (u32, u32) {
