@@ -489,14 +489,7 @@ impl<'a> Search<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn noisy(w: u32, h: u32, seed: u32) -> HeightField {
-        HeightField::from_height_fn(w, h, |x, y| {
-            let mut k = x.wrapping_mul(374_761_393) ^ y.wrapping_mul(668_265_263) ^ seed.wrapping_mul(2_246_822_519);
-            k = (k ^ (k >> 13)).wrapping_mul(1_274_126_177);
-            (k >> 8) as f32 / (1u32 << 24) as f32
-        })
-    }
+    use crate::pyramid::tests::noisy;
 
     /// The brute-force definition: over surface points sampled every `1 / n` texel across the
     /// searched area (3 x 3 tiles for wrap, the map for clamp), the least `dist(q, C) / (m -

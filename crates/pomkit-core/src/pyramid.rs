@@ -179,11 +179,12 @@ impl MaxHeightPyramid {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use glam::Vec2;
 
-    fn noisy(w: u32, h: u32, seed: u32) -> HeightField {
+    /// Hashed noise in `[0, 1)`, a different field per seed (shared with the cone map tests).
+    pub(crate) fn noisy(w: u32, h: u32, seed: u32) -> HeightField {
         HeightField::from_height_fn(w, h, |x, y| {
             let mut k = x.wrapping_mul(374_761_393) ^ y.wrapping_mul(668_265_263) ^ seed.wrapping_mul(2_246_822_519);
             k = (k ^ (k >> 13)).wrapping_mul(1_274_126_177);
