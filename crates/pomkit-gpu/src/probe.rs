@@ -238,20 +238,8 @@ impl RayProbe {
         params: &PomkitParams,
         rays: &[ProbeRay],
     ) -> Result<Vec<Hit>, ProbeError> {
-        let mut records = Vec::with_capacity(rays.len());
-        for (index, r) in rays.iter().enumerate() {
-            let bad = |field: &'static str, value: String| ProbeError::NotFinite { what: "ray", index, field, value };
-            if !r.uv.is_finite() {
-                return Err(bad("uv", format!("{}", r.uv)));
-            }
-            if !r.dir.is_finite() {
-                return Err(bad("dir", format!("{}", r.dir)));
-            }
-            if !r.lod.is_finite() {
-                return Err(bad("lod", format!("{}", r.lod)));
-            }
-            records.push([r.uv.x, r.uv.y, r.lod, 0.0, r.dir.x, r.dir.y, r.dir.z, 0.0]);
-        }
+        let records =
+            rays.iter().enumerate().map(|(index, r)| ray_record(index, r, 0.0)).collect::<Result<Vec<_>, _>>()?;
         let out = self.run(ctx, maps, params, &self.trace, &records)?;
         Ok(out.into_iter().map(|(uv, depth, fetches)| Hit { uv, depth, fetches }).collect())
     }
@@ -270,23 +258,18 @@ impl RayProbe {
         params: &PomkitParams,
         rays: &[(ProbeRay, f32)],
     ) -> Result<Vec<(Hit, bool)>, ProbeError> {
-        let mut records = Vec::with_capacity(rays.len());
-        for (index, (r, c)) in rays.iter().enumerate() {
-            let bad = |field: &'static str, value: String| ProbeError::NotFinite { what: "ray", index, field, value };
-            if !r.uv.is_finite() {
-                return Err(bad("uv", format!("{}", r.uv)));
-            }
-            if !r.dir.is_finite() {
-                return Err(bad("dir", format!("{}", r.dir)));
-            }
-            if !r.lod.is_finite() {
-                return Err(bad("lod", format!("{}", r.lod)));
-            }
-            if !c.is_finite() {
-                return Err(bad("curvature", format!("{c}")));
-            }
-            records.push([r.uv.x, r.uv.y, r.lod, 0.0, r.dir.x, r.dir.y, r.dir.z, *c]);
-        }
+        let records = rays
+            .iter()
+            .enumerate()
+            .map(|(index, (r, c))| {
+                let record = ray_record(index, r, *c)?;
+                if !c.is_finite() {
+                    let value = format!("{c}");
+                    return Err(ProbeError::NotFinite { what: "ray", index, field: "curvature", value });
+                }
+                Ok(record)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         let out = self.run(ctx, maps, params, &self.curved, &records)?;
         Ok(out
             .into_iter()
@@ -440,4 +423,20 @@ impl RayProbe {
         }
         Ok(())
     }
+}
+
+/// Ray `index` as the probe's record (`uv`, `lod`, direction, and `extra` in the last slot),
+/// after checking that it is finite.
+fn ray_record(index: usize, r: &ProbeRay, extra: f32) -> Result<[f32; 8], ProbeError> {
+    let bad = |field: &'static str, value: String| ProbeError::NotFinite { what: "ray", index, field, value };
+    if !r.uv.is_finite() {
+        return Err(bad("uv", format!("{}", r.uv)));
+    }
+    if !r.dir.is_finite() {
+        return Err(bad("dir", format!("{}", r.dir)));
+    }
+    if !r.lod.is_finite() {
+        return Err(bad("lod", format!("{}", r.lod)));
+    }
+    Ok([r.uv.x, r.uv.y, r.lod, 0.0, r.dir.x, r.dir.y, r.dir.z, extra])
 }
