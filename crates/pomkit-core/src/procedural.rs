@@ -741,25 +741,44 @@ fn hair_profile(t: f32) -> f32 {
 /// with hashed base radii `r` in `[0.24, 0.4]` cells and tips in `[0.55, 1]`; a hair stands
 /// `tip * hair_profile(|p - centre| / r)` high, the highest hair wins, and the skin is 0.
 fn fur(u: f32, v: f32) -> StrandSample {
-    let n = FUR_CELLS;
+    let floor = StrandSample { height: 0.0, along: 0.0, id: 0 };
+    highest_strand(u, v, FUR_CELLS, FUR_HAIRS_PER_CELL, 51, floor, |id, (i, j), (px, py)| {
+        let (hx, hy) = (i + hash01(id, 0, 53), j + hash01(id, 1, 54));
+        let r = FUR_RADIUS_MIN + (FUR_RADIUS_MAX - FUR_RADIUS_MIN) * hash01(id, 2, 55);
+        let t = ((px - hx).powi(2) + (py - hy).powi(2)).sqrt() / r;
+        if t >= 1.0 {
+            return None;
+        }
+        Some((FUR_TIP_MIN + (1.0 - FUR_TIP_MIN) * hash01(id, 3, 56), hair_profile(t)))
+    })
+}
+
+/// The highest strand over `(u, v)` of a pattern of `n` x `n` cells per tile with `per_cell`
+/// strands in each: for each of the 3 x 3 cells `(i, j)` around `p = n (u, v)` (hashed with
+/// `seed`, wrapped so the pattern tiles) and each of its strands (id hashed with `seed + 1`),
+/// `strand(id, (i, j), p)` gives the strand's tip height and how far up it `p` lies, or `None`
+/// off the strand. The highest `tip * along` wins over `floor`.
+fn highest_strand(
+    u: f32,
+    v: f32,
+    n: u32,
+    per_cell: u32,
+    seed: u32,
+    floor: StrandSample,
+    strand: impl Fn(u32, (f32, f32), (f32, f32)) -> Option<(f32, f32)>,
+) -> StrandSample {
     let (px, py) = (u * n as f32, v * n as f32);
     let (cx, cy) = (px.floor(), py.floor());
-    let mut best = StrandSample { height: 0.0, along: 0.0, id: 0 };
+    let mut best = floor;
     for dj in -1..=1 {
         for di in -1..=1 {
             let (i, j) = (cx + di as f32, cy + dj as f32);
-            let cell = hash3(wrap_index(i, n), wrap_index(j, n), 51);
-            for k in 0..FUR_HAIRS_PER_CELL {
-                let id = hash3(cell, k, 52) | 1;
-                let (hx, hy) = (i + hash01(id, 0, 53), j + hash01(id, 1, 54));
-                let r = FUR_RADIUS_MIN + (FUR_RADIUS_MAX - FUR_RADIUS_MIN) * hash01(id, 2, 55);
-                let t = ((px - hx).powi(2) + (py - hy).powi(2)).sqrt() / r;
-                if t >= 1.0 {
-                    continue;
-                }
-                let tip = FUR_TIP_MIN + (1.0 - FUR_TIP_MIN) * hash01(id, 3, 56);
-                let along = hair_profile(t);
-                if tip * along > best.height {
+            let cell = hash3(wrap_index(i, n), wrap_index(j, n), seed);
+            for k in 0..per_cell {
+                let id = hash3(cell, k, seed + 1) | 1;
+                if let Some((tip, along)) = strand(id, (i, j), (px, py))
+                    && tip * along > best.height
+                {
                     best = StrandSample { height: tip * along, along, id };
                 }
             }
@@ -792,42 +811,26 @@ fn fur_albedo(u: f32, v: f32) -> [f32; 3] {
 /// stands `tip * (1 - |s| / L) * sqrt(1 - (n / w)^2)` high: a pointed top edge over steep
 /// rounded sides. The highest blade wins; the soil is `0.08` of two octaves of value noise.
 fn grass(u: f32, v: f32) -> StrandSample {
-    let n = GRASS_CELLS;
-    let (px, py) = (u * n as f32, v * n as f32);
-    let (cx, cy) = (px.floor(), py.floor());
     let soil = GRASS_SOIL * fbm(u, v, 24, 71);
-    let mut best = StrandSample { height: soil, along: 0.0, id: 0 };
-    for dj in -1..=1 {
-        for di in -1..=1 {
-            let (i, j) = (cx + di as f32, cy + dj as f32);
-            let cell = hash3(wrap_index(i, n), wrap_index(j, n), 72);
-            for k in 0..GRASS_BLADES_PER_CELL {
-                let id = hash3(cell, k, 73) | 1;
-                let (bx, by) = (i + hash01(id, 0, 74), j + hash01(id, 1, 75));
-                let (sin, cos) = (PI * hash01(id, 2, 76)).sin_cos();
-                let (dx, dy) = (px - bx, py - by);
-                let (s, across) = (dx * cos + dy * sin, -dx * sin + dy * cos);
-                let len = GRASS_HALF_LENGTH_MIN + (GRASS_HALF_LENGTH_MAX - GRASS_HALF_LENGTH_MIN) * hash01(id, 3, 77);
-                let half_width =
-                    GRASS_HALF_WIDTH_MIN + (GRASS_HALF_WIDTH_MAX - GRASS_HALF_WIDTH_MIN) * hash01(id, 4, 78);
-                let bend = GRASS_BEND * (2.0 * hash01(id, 5, 79) - 1.0);
-                let a = s.abs() / len;
-                if a >= 1.0 {
-                    continue;
-                }
-                let c = (across - bend * a * a) / half_width;
-                if c.abs() >= 1.0 {
-                    continue;
-                }
-                let tip = GRASS_TIP_MIN + (1.0 - GRASS_TIP_MIN) * hash01(id, 6, 80);
-                let along = (1.0 - a) * (1.0 - c * c).sqrt();
-                if tip * along > best.height {
-                    best = StrandSample { height: tip * along, along, id };
-                }
-            }
+    let floor = StrandSample { height: soil, along: 0.0, id: 0 };
+    highest_strand(u, v, GRASS_CELLS, GRASS_BLADES_PER_CELL, 72, floor, |id, (i, j), (px, py)| {
+        let (bx, by) = (i + hash01(id, 0, 74), j + hash01(id, 1, 75));
+        let (sin, cos) = (PI * hash01(id, 2, 76)).sin_cos();
+        let (dx, dy) = (px - bx, py - by);
+        let (s, across) = (dx * cos + dy * sin, -dx * sin + dy * cos);
+        let len = GRASS_HALF_LENGTH_MIN + (GRASS_HALF_LENGTH_MAX - GRASS_HALF_LENGTH_MIN) * hash01(id, 3, 77);
+        let half_width = GRASS_HALF_WIDTH_MIN + (GRASS_HALF_WIDTH_MAX - GRASS_HALF_WIDTH_MIN) * hash01(id, 4, 78);
+        let bend = GRASS_BEND * (2.0 * hash01(id, 5, 79) - 1.0);
+        let a = s.abs() / len;
+        if a >= 1.0 {
+            return None;
         }
-    }
-    best
+        let c = (across - bend * a * a) / half_width;
+        if c.abs() >= 1.0 {
+            return None;
+        }
+        Some((GRASS_TIP_MIN + (1.0 - GRASS_TIP_MIN) * hash01(id, 6, 80), (1.0 - a) * (1.0 - c * c).sqrt()))
+    })
 }
 
 fn grass_albedo(u: f32, v: f32) -> [f32; 3] {
