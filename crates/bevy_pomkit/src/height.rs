@@ -5,7 +5,8 @@
 //!   deepest point), G = the parallax value `clamp(n_z * d, 0, 1)` that the `parallax`
 //!   technique reads.
 //! - `pyramid`: `R32Float`, the maximum-height (minimum-depth) pyramid of the exact tracer,
-//!   padded to powers of two; mip `l` holds level `l` in its top-left corner.
+//!   padded to powers of two; mip `l` holds level `l` in its top-left corner. It has no green
+//!   channel, so the library's `cone` technique walks it as `exact` does (the same hits).
 //! - `normals`: `Rgba16Float`, the tangent-space normal (x along +u, y up the image, z out of
 //!   the surface) baked at Lengyel's scale `depth_scale * width`.
 

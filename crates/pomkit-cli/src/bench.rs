@@ -85,7 +85,7 @@ pub struct BenchArgs {
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
     /// Techniques to time, comma-separated: any of flat, normal, parallax, iterative, steep,
-    /// pom-classic, pom, relief, exact, `all` for all of those, and `material` for each
+    /// pom-classic, pom, relief, exact, cone, `all` for all of those, and `material` for each
     /// material's own technique.
     #[arg(long, default_value = "all,material", value_name = "T,..")]
     techniques: String,

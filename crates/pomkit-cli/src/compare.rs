@@ -7,7 +7,6 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use pomkit_core::accuracy::{self, AccuracyRow, DEFAULT_SEED};
-use pomkit_core::trace::Surface;
 
 use crate::technique::{self, TechniqueArgs};
 use crate::{HeightOption, output, progress};
@@ -43,7 +42,7 @@ pub struct CompareArgs {
     #[arg(long, default_value = "0,30,60,75,85", allow_hyphen_values = true, value_name = "DEG,..")]
     angles: String,
     /// `all`, or techniques separated by commas (flat, normal, parallax, iterative, steep,
-    /// pom-classic, pom, relief, exact).
+    /// pom-classic, pom, relief, exact, cone).
     #[arg(long, default_value = "all", value_name = "T,..")]
     techniques: String,
     /// Rays per angle (1 to 1000000). More rays give steadier statistics and take longer.
@@ -83,14 +82,13 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     // Checked before any work; the table appears only when complete, never over the height map.
     let mut outs = pomkit_io::output::Outputs::new();
-    if !a.height.input.starts_with("builtin:") {
-        outs.input(&a.height.input);
+    for input in a.height.inputs() {
+        outs.input(&input);
     }
     let out_id = outs.output(&out);
     outs.check()?;
-    let field = a.height.load()?;
-    let (w, h) = (field.width(), field.height());
-    let surface = Surface::new(field, params.edges, params.depth_scale);
+    let surface = a.height.surface(&params)?;
+    let (w, h) = (surface.field().width(), surface.field().height());
     let pb = progress::items((angles.len() * a.rays) as u64, MIN_RAYS_FOR_BAR, "comparing", "rays");
     let rows = accuracy::compare(&surface, &techniques, &angles, &params, a.rays, a.seed, &|n| pb.inc(n as u64));
     pb.finish_and_clear();

@@ -26,7 +26,7 @@ pub struct RenderArgs {
     #[arg(short, long, default_value = "pomkit.png")]
     output: PathBuf,
     /// Use this technique on every material (flat, normal, parallax, iterative, steep,
-    /// pom-classic, pom, relief, exact) or `displaced` for the ground truth: the meshes
+    /// pom-classic, pom, relief, exact, cone) or `displaced` for the ground truth: the meshes
     /// tessellated to the height map's resolution and displaced for real.
     #[arg(long)]
     technique: Option<String>,

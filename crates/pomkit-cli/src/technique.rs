@@ -31,7 +31,8 @@ pub struct TechniqueArgs {
     /// better on slopes; no occlusion at any k.
     #[arg(long, default_value_t = 4, value_name = "K")]
     pub iterations: u32,
-    /// relief: binary refinement steps after the linear search (one fetch each, at most 64).
+    /// relief and cone: binary refinement steps after the linear search (relief) or a relaxed
+    /// cone step (cone), one fetch each, at most 64.
     #[arg(long, default_value_t = 6, value_name = "K")]
     pub binary_steps: u32,
     /// pom: secant refinement steps after the linear search (one fetch each, at most 64).

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use pomkit_core::trace::{Hit, Ray, Surface, Technique, trace};
+use pomkit_core::trace::{Hit, Ray, Technique, trace};
 use pomkit_io::output::Outputs;
 use pomkit_io::rays::RayReader;
 use rayon::prelude::*;
@@ -73,8 +73,8 @@ pub fn run(a: &TraceArgs) -> Result<()> {
     // Every output is checked before any work, and never one of the inputs.
     let mut outs = Outputs::new();
     outs.input(&a.rays);
-    if !a.height.input.starts_with("builtin:") {
-        outs.input(&a.height.input);
+    for input in a.height.inputs() {
+        outs.input(&input);
     }
     let out = outs.output(&a.output);
     outs.check()?;
@@ -85,8 +85,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
         (Box::new(BufReader::new(file)), a.rays.display().to_string())
     };
     let mut rays = RayReader::new(reader, &name)?;
-    let field = a.height.load()?;
-    let surface = Surface::new(field, params.edges, params.depth_scale);
+    let surface = a.height.surface(&params)?;
     let mut counter = progress::Counter::new(MIN_RAYS_FOR_BAR, "tracing", "rays");
     let mut count = 0u64;
     // Streamed: a batch of rays is read, traced in parallel and written, then the next, so

@@ -193,7 +193,19 @@ fn all_and_material_list_every_technique_once() {
     let names: Vec<String> = parse(&stdout(&out)).into_iter().map(|r| r.technique).collect();
     assert_eq!(
         names,
-        ["pom", "flat", "normal", "parallax", "iterative", "steep", "pom-classic", "relief", "exact", "material"]
+        [
+            "pom",
+            "flat",
+            "normal",
+            "parallax",
+            "iterative",
+            "steep",
+            "pom-classic",
+            "relief",
+            "exact",
+            "cone",
+            "material"
+        ]
     );
 }
 

@@ -97,6 +97,7 @@ fn fur_and_grass_table() {
         ("relief, 16 planes + 6 binary steps", Technique::Relief, with(&|t| t.samples = 16), false),
         ("relief, 32 planes + 6 binary steps", Technique::Relief, with(&|t| t.samples = 32), true),
         ("exact", Technique::Exact, scene.clone(), true),
+        ("cone", Technique::Cone, scene.clone(), true),
     ];
     for supersample in [1, 2] {
         let opts = RenderOptions { width: 640, height: 360, supersample, aovs: true, ..Default::default() };

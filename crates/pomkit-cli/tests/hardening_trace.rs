@@ -126,7 +126,7 @@ fn the_largest_depth_scale_still_finishes() {
     assert!(out.status.success(), "{args:?}: {}", stderr(&out));
     let table = std::fs::read_to_string(dir.path().join("t.csv")).expect("table written");
     let rows: Vec<Vec<&str>> = table.lines().skip(1).map(|l| l.split(',').collect()).collect();
-    assert_eq!(rows.len(), 9 * 5, "every technique at every default angle");
+    assert_eq!(rows.len(), 10 * 5, "every technique at every default angle");
     for r in &rows {
         let mean: f64 = r[3].parse().expect("mean error");
         assert!(mean.is_finite() && mean >= 0.0, "{r:?}");

@@ -254,7 +254,7 @@ fn bad_scenes_and_flags_fail_with_clear_messages() {
         assert!(!dir.path().join("x.png").exists());
     }
     for (args, needle) in [
-        (vec!["render", "--technique", "cone", "-o", "x.png"], "cone"),
+        (vec!["render", "--technique", "cones", "-o", "x.png"], "cones"),
         (vec!["render", "--size", "0x10", "-o", "x.png"], "--size"),
         (vec!["render", "--aov", "normals", "-o", "x.png"], "normals"),
         (vec!["render", "-o", "x.jpg"], ".png"),

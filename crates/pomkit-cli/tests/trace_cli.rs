@@ -402,3 +402,93 @@ fn trace_and_compare_help_list_every_technique_option() {
         assert!(text.contains(needle), "compare --help lacks {needle}");
     }
 }
+
+/// `--cone-map`: a map baked by `pomkit bake cone` is read back and stepped on as relaxed
+/// cones; its quantized cones are still conservative, so the hits are exact's (the exact
+/// tracer's, an independent walk), with a look after each cone step.
+#[test]
+fn trace_steps_on_a_baked_cone_map() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let height = "builtin:cobblestones:64x64";
+    let out = pomkit(&["bake", "cone", height, "-o", "cones.png"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let rays = sample_rays();
+    std::fs::write(dir.path().join("rays.csv"), rays_csv(&rays)).unwrap();
+    let run = |extra: &[&str], output: &str| {
+        let mut args = vec!["trace", "--height", height, "--technique", "cone", "--rays", "rays.csv", "-o", output];
+        args.extend_from_slice(extra);
+        let out = pomkit(&args, dir.path());
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        parse_hits(&std::fs::read_to_string(dir.path().join(output)).unwrap())
+    };
+    let read = run(&["--cone-map", "cones.png"], "read.csv");
+    let built = run(&[], "built.csv");
+    let surface = Surface::new(procedural::generate(Pattern::Cobblestones, 64, 64), EdgeMode::Wrap, 0.1);
+    let (mut read_fetches, mut built_fetches) = (0, 0);
+    for ((ray, r), b) in rays.iter().zip(&read).zip(&built) {
+        let exact = trace(&surface, ray, Technique::Exact, &TraceParams::default());
+        for (name, h) in [("read", r), ("built", b)] {
+            let err = (Vec2::new(h.0, h.1) - exact.uv).length() * 64.0;
+            assert!(err < 1e-3, "{name} cones, {ray:?}: {h:?} against exact {exact:?}");
+        }
+        read_fetches += r.3;
+        built_fetches += b.3;
+    }
+    assert!(read_fetches > built_fetches, "read cones look after each step: {read_fetches} vs {built_fetches}");
+}
+
+/// A cone map of another size, an image that is not a cone map, and a missing file: each
+/// fails naming the file and the problem, and leaves no hits file.
+#[test]
+fn bad_cone_maps_fail_clearly_and_leave_no_file() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    std::fs::write(dir.path().join("rays.csv"), rays_csv(&sample_rays())).unwrap();
+    let ok = |args: &[&str]| assert!(pomkit(args, dir.path()).status.success(), "{args:?}");
+    ok(&["bake", "cone", "builtin:bricks:32x32", "-o", "small_cones.png"]);
+    ok(&["generate", "bricks", "--size", "64x64", "-o", "height.png"]);
+    std::fs::write(dir.path().join("junk.png"), b"not an image").unwrap();
+    for (cones, needles) in [
+        ("small_cones.png", &["small_cones.png", "32x32", "64x64", "bake cone"][..]),
+        ("height.png", &["height.png", "not a cone map", "16-bit grey + alpha"][..]),
+        ("junk.png", &["junk.png"][..]),
+        ("missing.png", &["missing.png"][..]),
+    ] {
+        let args = [
+            "trace",
+            "--height",
+            "height.png",
+            "--technique",
+            "cone",
+            "--cone-map",
+            cones,
+            "--rays",
+            "rays.csv",
+            "-o",
+            "hits.csv",
+        ];
+        let out = pomkit(&args, dir.path());
+        assert!(!out.status.success(), "{args:?}");
+        for n in needles {
+            assert!(stderr(&out).contains(n), "{args:?}: stderr lacks '{n}':\n{}", stderr(&out));
+        }
+        assert!(!dir.path().join("hits.csv").exists(), "{args:?} left a hits file");
+    }
+    // The hits file may not overwrite the cone map.
+    let out = pomkit(
+        &[
+            "trace",
+            "--height",
+            "height.png",
+            "--technique",
+            "cone",
+            "--cone-map",
+            "small_cones.png",
+            "--rays",
+            "rays.csv",
+            "-o",
+            "small_cones.png",
+        ],
+        dir.path(),
+    );
+    assert!(!out.status.success() && stderr(&out).contains("small_cones.png"), "{}", stderr(&out));
+}

@@ -87,6 +87,40 @@ pub struct ConeMap {
     top: Vec<f32>,
     /// Cone ratio of each footprint, texels per unit depth, in `[0, cap]`, row-major.
     ratio: Vec<f32>,
+    /// Whether the cones may hold surface (relaxed: a ray must look after each step) or are
+    /// known to hold none (conservative: a step inside a cone needs no look).
+    relaxed: bool,
+}
+
+/// Why a cone map image was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConeMapError {
+    /// The cone map's size is not the height map's.
+    #[error(
+        "the cone map is {got_w}x{got_h} but the height map is {want_w}x{want_h}: bake the cone map from this height map (`pomkit bake cone`)"
+    )]
+    Size {
+        /// Cone map width.
+        got_w: u32,
+        /// Cone map height.
+        got_h: u32,
+        /// Height map width.
+        want_w: u32,
+        /// Height map height.
+        want_h: u32,
+    },
+    /// The sample count is not two per texel (grey + alpha).
+    #[error(
+        "the cone map has {got} samples for {w}x{h} texels: expected 2 per texel (grey = top, alpha = cone), as `pomkit bake cone` writes"
+    )]
+    Samples {
+        /// Samples given.
+        got: usize,
+        /// Width.
+        w: u32,
+        /// Height.
+        h: u32,
+    },
 }
 
 impl ConeMap {
@@ -118,7 +152,58 @@ impl ConeMap {
             })
             .collect();
         let (top, ratio) = rows.into_iter().flatten().unzip();
-        Self { width: w, height: h, edges, top, ratio }
+        Self { width: w, height: h, edges, top, ratio, relaxed: false }
+    }
+
+    /// Decodes the grey + alpha samples of [`ConeMap::to_gray_alpha16`] (a baked cone map,
+    /// `2 * width * height` values) for a `width` x `height` height map traced with `edges`
+    /// (which the map must have been baked for). A loaded map counts as relaxed: nothing in the
+    /// image says its cones are conservative, so a tracer looks after every step.
+    ///
+    /// # Errors
+    /// [`ConeMapError::Samples`] if `samples` does not hold two values per texel.
+    pub fn from_gray_alpha16(width: u32, height: u32, edges: EdgeMode, samples: &[u16]) -> Result<Self, ConeMapError> {
+        let n = width as usize * height as usize;
+        if samples.len() != 2 * n || n == 0 {
+            return Err(ConeMapError::Samples { got: samples.len(), w: width, h: height });
+        }
+        let cap = width.min(height) as f32;
+        let (top, ratio) = samples
+            .chunks_exact(2)
+            .map(|g| {
+                let top = 1.0 - f32::from(g[0]) / 65535.0;
+                let a = f32::from(g[1]) / 65535.0;
+                // Rounding down in f32 keeps the decoded cone inside the stored one.
+                (top, (a * a * cap * (1.0 - 1e-6)).min(cap))
+            })
+            .unzip();
+        Ok(Self { width, height, edges, top, ratio, relaxed: true })
+    }
+
+    /// Whether the cones may hold surface points (a tracer must look after each step): true for
+    /// maps read from images, false for conservative cones built here.
+    #[must_use]
+    pub fn relaxed(&self) -> bool {
+        self.relaxed
+    }
+
+    /// Checks that these cones belong to a `width` x `height` height map.
+    ///
+    /// # Errors
+    /// [`ConeMapError::Size`] if the sizes differ.
+    pub fn check_size(&self, width: u32, height: u32) -> Result<(), ConeMapError> {
+        if (self.width, self.height) == (width, height) {
+            Ok(())
+        } else {
+            Err(ConeMapError::Size { got_w: self.width, got_h: self.height, want_w: width, want_h: height })
+        }
+    }
+
+    /// Top and ratio of footprint `(x, y)` without the bounds check (the tracers' read).
+    #[inline]
+    pub(crate) fn texel(&self, x: u32, y: u32) -> (f32, f32) {
+        let k = (y * self.width + x) as usize;
+        (self.top[k], self.ratio[k])
     }
 
     /// About how many bytes building the cones of a `width` x `height` map and writing them
@@ -194,6 +279,33 @@ impl ConeMap {
     }
 }
 
+/// The conservative cones of `field` for `edges`, built once per height field and shared while
+/// the field lives: renderers that prepare their surfaces for every frame (the CPU renderer)
+/// find them here instead of building them again. Entries of fields that were dropped are
+/// forgotten.
+#[must_use]
+pub fn cached(field: &std::sync::Arc<HeightField>, edges: EdgeMode) -> std::sync::Arc<ConeMap> {
+    use std::sync::{Arc, Mutex, Weak};
+    type Entry = (Weak<HeightField>, EdgeMode, Arc<ConeMap>);
+    static CACHE: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
+    let find = |cache: &mut Vec<Entry>| {
+        cache.retain(|(f, _, _)| f.strong_count() > 0);
+        cache.iter().find(|(f, e, _)| *e == edges && f.as_ptr() == Arc::as_ptr(field)).map(|(_, _, c)| Arc::clone(c))
+    };
+    // A poisoned lock only means another thread panicked while holding it; the list stays valid.
+    if let Some(c) = find(&mut CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner)) {
+        return c;
+    }
+    // Built outside the lock: two threads may both build the same cones, never wait on each other.
+    let cones = Arc::new(ConeMap::conservative(field, edges));
+    let mut cache = CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(c) = find(&mut cache) {
+        return c;
+    }
+    cache.push((Arc::downgrade(field), edges, Arc::clone(&cones)));
+    cones
+}
+
 /// How far a ray may advance without meeting the surface, from a point of footprint `C` at depth
 /// `z`: the ray parameter `t` of the cone's boundary, for a ray that moves `horizontal` texels
 /// and `dz` in depth per unit of `t` (`dz >= 0`, down). `top` and `ratio` are `C`'s
@@ -211,6 +323,109 @@ pub fn safe_step(top: f32, ratio: f32, z: f32, horizontal: f32, dz: f32) -> f32 
     }
     let rate = dz.max(0.0) + horizontal.max(0.0) / ratio;
     if rate > 0.0 { (top - z) / rate } else { f32::INFINITY }
+}
+
+/// The `cone` technique: the first `t` in `[t0, t1]` where the ray `o + t d` (texel
+/// coordinates and depth, going down: `d.z > 0`) is at or below the surface, by cone stepping on
+/// `surface`'s cone map ([`crate::trace::Surface::cones`]).
+///
+/// Each step reads the cone of the footprint `C` the ray is in (one fetch) and
+/// - above `C`'s top, advances by the longer of two safe moves: [`safe_step`] to the cone's
+///   boundary, and the stretch over `C` until the ray reaches the top or leaves `C` (the
+///   surface over `C` is nowhere shallower than its top);
+/// - at or below the top, solves the ray exactly against the bilinear patches it crosses in `C`
+///   (one gather each, as `exact` does at its pyramid's level 0), then moves to the next
+///   footprint.
+///
+/// With conservative cones ([`ConeMap::conservative`]) nothing is skipped that holds surface,
+/// so the hit is the exact first intersection, as `exact`'s. A relaxed map (one read from an
+/// image) may hold surface inside a cone: after each cone step one bilinear read says whether
+/// the ray went under, and `binary_steps` halvings of that step find the crossing (Policarpo and
+/// Oliveira's relaxed cone stepping).
+///
+/// # Termination
+/// At most [`crate::trace::exact_step_bound`] steps for the ray's segment: each step either
+/// ends the walk, crosses a texel boundary (a leaf step, or the column stretch to `C`'s edge),
+/// or brings the ray to `C`'s top, after which the next step is a leaf step in `C`. So there are
+/// at most two steps per boundary crossed; the bound counts each boundary twice already.
+pub(crate) fn first_hit(
+    surface: &crate::trace::Surface,
+    o: glam::DVec3,
+    d: glam::DVec3,
+    t0: f64,
+    t1: f64,
+    p: &crate::trace::TraceParams,
+) -> crate::trace::ExactResult {
+    use crate::trace::{ExactResult, entered_cell, leaf_hit};
+    let cones = surface.cones();
+    let f = surface.field();
+    let pyr = surface.pyramid();
+    let (w, h) = (i64::from(f.width()), i64::from(f.height()));
+    let edges = surface.edges();
+    let horizontal = d.x.hypot(d.y);
+    let relaxed = cones.relaxed();
+    let mut fetches = 0u32;
+    let mut last_patch = None;
+    let mut t = t0;
+    let mut bracket = None;
+    let max_steps = crate::trace::exact_step_bound(d, t0, t1, w, h, edges);
+    for _ in 0..max_steps {
+        if t >= t1 {
+            break;
+        }
+        let Some((cell, _, t_exit)) = entered_cell(pyr, 0, o, d, t, t1, w, h, edges) else { break };
+        let (top, ratio) = cones.texel(cell.ix, cell.iy);
+        let (top, ratio) = (f64::from(top), f64::from(ratio));
+        fetches = fetches.saturating_add(1);
+        let z = o.z + d.z * t;
+        if z < top {
+            // Both moves keep the ray above every point of the surface they pass over.
+            let rate = d.z + horizontal / ratio;
+            let cone = if ratio > 0.0 && rate > 0.0 { (top - z) / rate } else { 0.0 };
+            let column = ((top - o.z) / d.z).min(t_exit) - t;
+            let next = (t + cone.max(column)).min(t1);
+            if relaxed && cone > column {
+                fetches = fetches.saturating_add(1);
+                let q = o + d * next;
+                if surface_depth(f, edges, q.x, q.y) <= q.z {
+                    bracket = Some((t, next));
+                    break;
+                }
+            }
+            t = next;
+            continue;
+        }
+        let (hit, gathers) = leaf_hit(f, edges, o, d, t, t_exit.min(t1), &cell, &mut last_patch);
+        fetches = fetches.saturating_add(gathers);
+        if hit.is_some() {
+            return ExactResult { t: hit, fetches };
+        }
+        t = t_exit;
+    }
+    let Some((mut lo, mut hi)) = bracket else { return ExactResult { t: None, fetches } };
+    for _ in 0..p.binary_steps {
+        let mid = 0.5 * (lo + hi);
+        let q = o + d * mid;
+        fetches = fetches.saturating_add(1);
+        if surface_depth(f, edges, q.x, q.y) <= q.z {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    ExactResult { t: Some(if p.binary_steps > 0 { 0.5 * (lo + hi) } else { hi }), fetches }
+}
+
+/// The bilinear surface of `f`'s texels at `(x, y)` in texel units (centres at half-integers).
+fn surface_depth(f: &HeightField, edges: EdgeMode, x: f64, y: f64) -> f64 {
+    let (sx, sy) = (x - 0.5, y - 0.5);
+    let (fx, fy) = (sx.floor(), sy.floor());
+    let (tx, ty) = (sx - fx, sy - fy);
+    let (k, l) = (fx as i64, fy as i64);
+    let at = |i: i64, j: i64| f64::from(f.depth_at(i, j, edges));
+    let top = at(k, l) + (at(k + 1, l) - at(k, l)) * tx;
+    let bottom = at(k, l + 1) + (at(k + 1, l + 1) - at(k, l + 1)) * tx;
+    top + (bottom - top) * ty
 }
 
 /// A rectangle of the plane in texel units, with the least depth of the surface over it.

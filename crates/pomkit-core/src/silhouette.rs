@@ -161,7 +161,13 @@ pub fn trace_curved(
             let h = march(surface, reduced, dir, technique, &p, &Straight);
             (h.uv, h.depth, h.fetches, bend.relative(h.depth) >= 0.0)
         }
-        Technique::Exact => exact_curved(surface, reduced, dir, &p, &bend),
+        Technique::Cone if bend.c == 0.0 => {
+            let h = march(surface, reduced, dir, technique, &p, &Straight);
+            (h.uv, h.depth, h.fetches, true)
+        }
+        // A cone map holds for the straight ray only: a bent `cone` ray is walked as `exact`'s
+        // (the same hits: both are exact).
+        Technique::Exact | Technique::Cone => exact_curved(surface, reduced, dir, &p, &bend),
         _ => {
             let h = march(surface, reduced, dir, technique, &p, &bend);
             (h.uv, h.depth * bend.t_end, h.fetches, !(bend.exits && h.depth >= 1.0))

@@ -20,6 +20,7 @@
 use glam::{DVec2, DVec3, Vec2, Vec3};
 
 use crate::bake::{NormalBakeOptions, NormalFilter, bake_normals};
+use crate::cone::{ConeMap, ConeMapError};
 use crate::heightfield::{EdgeMode, HeightField, MipChain};
 use crate::pyramid::MaxHeightPyramid;
 
@@ -128,11 +129,18 @@ pub enum Technique {
     /// The exact first intersection with the bilinear surface of the mip-0 texels, by
     /// maximum-height pyramid traversal. Never misses a feature; O(log size) fetches typically.
     Exact,
+    /// Cone stepping (Dummer 2006; Policarpo & Oliveira 2007) on the surface's cone map
+    /// ([`crate::cone`]): jumps as far as each footprint's cone allows, texel by texel where the
+    /// ray is below a footprint's top, then `binary_steps` of binary search in the step that
+    /// ended below the surface. With the cones pomkit builds (conservative) the hit is exact,
+    /// as `exact`'s; with a baked map read from an image, relaxed cone stepping. Bounded as
+    /// `exact` is ([`Surface::cone_fetch_bound`]).
+    Cone,
 }
 
 impl Technique {
-    /// Every technique, cheapest first.
-    pub const ALL: [Technique; 9] = [
+    /// Every technique: the seeds' cheapest first, then pomkit's own.
+    pub const ALL: [Technique; 10] = [
         Technique::Flat,
         Technique::Normal,
         Technique::Parallax,
@@ -142,6 +150,7 @@ impl Technique {
         Technique::Pom,
         Technique::Relief,
         Technique::Exact,
+        Technique::Cone,
     ];
 
     /// The name used by the command line and scene files.
@@ -157,6 +166,7 @@ impl Technique {
             Technique::Pom => "pom",
             Technique::Relief => "relief",
             Technique::Exact => "exact",
+            Technique::Cone => "cone",
         }
     }
 
@@ -183,6 +193,7 @@ impl Technique {
             Technique::Pom => p.max_samples + 1 + p.refine,
             Technique::Relief => p.samples + p.binary_steps,
             Technique::Exact => surface.exact_fetch_bound(p.depth_scale),
+            Technique::Cone => surface.cone_fetch_bound(p.depth_scale, p.binary_steps),
         }
     }
 }
@@ -231,7 +242,7 @@ pub struct TraceParams {
     pub samples: u32,
     /// `iterative`: parallax steps k. Default 4 (Lengyel's listing).
     pub iterations: u32,
-    /// `relief`: binary refinement steps. Default 6.
+    /// `relief` and `cone`: binary refinement steps. Default 6.
     pub binary_steps: u32,
     /// `pom`: secant refinement steps after the linear search (Unity HDRP style). Default 0.
     pub refine: u32,
@@ -364,6 +375,8 @@ pub struct Surface {
     parallax: MipChain,
     edges: EdgeMode,
     depth_scale: f32,
+    /// The cone map of `cone`, built on first use or set by [`Surface::set_cones`].
+    cones: std::sync::OnceLock<std::sync::Arc<ConeMap>>,
 }
 
 impl Surface {
@@ -388,7 +401,40 @@ impl Surface {
         } else {
             field.clone()
         };
-        Self { mips: MipChain::new(field), pyramid, parallax: MipChain::new(parallax), edges, depth_scale: scale }
+        Self {
+            mips: MipChain::new(field),
+            pyramid,
+            parallax: MipChain::new(parallax),
+            edges,
+            depth_scale: scale,
+            cones: std::sync::OnceLock::new(),
+        }
+    }
+
+    /// The cone map `cone` steps on: the one given to [`Surface::set_cones`], or else the
+    /// conservative cones of the field, built on first use ([`ConeMap::conservative`]: about
+    /// 1.5 s for a 512 x 512 map on two cores).
+    pub fn cones(&self) -> &ConeMap {
+        self.cones.get_or_init(|| std::sync::Arc::new(ConeMap::conservative(self.field(), self.edges)))
+    }
+
+    /// Whether the cone map is there already (given, or built by an earlier `cone` trace).
+    #[must_use]
+    pub fn has_cones(&self) -> bool {
+        self.cones.get().is_some()
+    }
+
+    /// Uses `cones` (a baked cone map, [`ConeMap::from_gray_alpha16`], or the shared map of
+    /// [`crate::cone::cached`]) instead of building them. They must be this field's cones for
+    /// this edge mode: only the size can be checked.
+    ///
+    /// # Errors
+    /// [`ConeMapError::Size`] if the map's size is not the field's.
+    pub fn set_cones(&mut self, cones: impl Into<std::sync::Arc<ConeMap>>) -> Result<(), ConeMapError> {
+        let cones = cones.into();
+        cones.check_size(self.field().width(), self.field().height())?;
+        self.cones = std::sync::OnceLock::from(cones);
+        Ok(())
     }
 
     /// The height field (mip 0).
@@ -457,6 +503,29 @@ impl Surface {
         // one fetch to lift the receiver (counted here too).
         u32::try_from(steps.saturating_mul(4).saturating_add(1)).unwrap_or(u32::MAX)
     }
+}
+
+impl Surface {
+    /// The most fetches the `cone` technique makes for one view ray at `depth_scale` with
+    /// `binary_steps`: at most two steps per texel boundary the ray crosses (as for `exact`,
+    /// [`Surface::exact_fetch_bound`]), each one cone read and then up to three gathers, and the
+    /// binary search. Saturates at `u32::MAX`.
+    #[must_use]
+    pub fn cone_fetch_bound(&self, depth_scale: f32, binary_steps: u32) -> u32 {
+        let steps = cone_step_bound(self, depth_scale);
+        u32::try_from(steps.saturating_mul(4).saturating_add(u64::from(binary_steps.min(64)))).unwrap_or(u32::MAX)
+    }
+}
+
+/// The most steps of [`crate::cone::first_hit`] for a view ray at `depth_scale`: two per
+/// texel boundary crossed (a step above a footprint's top ends at the top or past a boundary;
+/// a step at or below it crosses the footprint), over the longest ray accepted.
+pub(crate) fn cone_step_bound(surface: &Surface, depth_scale: f32) -> u64 {
+    let f = surface.field();
+    let travel = f64::from(sanitized_depth_scale(depth_scale)) / f64::from(MIN_COS) * (1.0 + 1e-4);
+    let d = DVec3::new(travel * f64::from(f.width()), travel * f64::from(f.height()), 1.0);
+    let (w, h) = (i64::from(f.width()), i64::from(f.height()));
+    exact_step_bound(d, 0.0, 1.0, w, h, surface.edges())
 }
 
 /// Splits `uv` into its tile `k = floor(uv)` (per axis, in f64) and the point `uv - k` in that
@@ -649,6 +718,8 @@ pub(crate) fn march<P: Profile>(
         Technique::Pom => pom(surface, uv0, dir, s, p, profile),
         Technique::Relief => relief(surface, uv0, s, p, profile),
         Technique::Exact => exact_view(surface, uv0, s),
+        // The cones hold for the straight ray; `trace_curved` walks bent rays as `exact` does.
+        Technique::Cone => cone_view(surface, uv0, s, p),
     }
 }
 
@@ -797,6 +868,18 @@ fn exact_view(surface: &Surface, uv0: Vec2, s: Vec2) -> Hit {
     Hit { uv: Vec2::new((p.x / size.x) as f32, (p.y / size.y) as f32), depth: t as f32, fetches: r.fetches }
 }
 
+/// The cone view trace ([`crate::cone::first_hit`]) from depth 0 down to depth 1.
+fn cone_view(surface: &Surface, uv0: Vec2, s: Vec2, p: &TraceParams) -> Hit {
+    let f = surface.field();
+    let size = DVec2::new(f64::from(f.width()), f64::from(f.height()));
+    let o = DVec3::new(f64::from(uv0.x) * size.x, f64::from(uv0.y) * size.y, 0.0);
+    let d = DVec3::new(f64::from(s.x) * size.x, f64::from(s.y) * size.y, 1.0);
+    let r = crate::cone::first_hit(surface, o, d, 0.0, 1.0, p);
+    let t = r.t.unwrap_or(1.0).clamp(0.0, 1.0);
+    let q = o + d * t;
+    Hit { uv: Vec2::new((q.x / size.x) as f32, (q.y / size.y) as f32), depth: t as f32, fetches: r.fetches }
+}
+
 /// Result of a pyramid traversal.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ExactResult {
@@ -935,7 +1018,7 @@ pub(crate) fn exact_step_bound(d: DVec3, t0: f64, t1: f64, w: i64, h: i64, edges
 /// such wall, into the neighbour, whose far wall is at least a texel further. `None` if even
 /// that makes no progress (only for texel travel beyond about 2^50).
 #[expect(clippy::too_many_arguments, reason = "the pyramid level, the ray, its segment and the field's size")]
-fn entered_cell(
+pub(crate) fn entered_cell(
     pyr: &MaxHeightPyramid,
     level: usize,
     o: DVec3,
@@ -1000,9 +1083,9 @@ fn exit_time(cell: &Cell, o: DVec3, d: DVec3, t: f64, t1: f64) -> f64 {
 }
 
 /// A pyramid cell in unbounded texel coordinates, with its indices in the level.
-struct Cell {
-    ix: u32,
-    iy: u32,
+pub(crate) struct Cell {
+    pub(crate) ix: u32,
+    pub(crate) iy: u32,
     x0: f64,
     x1: f64,
     y0: f64,
@@ -1053,7 +1136,7 @@ fn cell_at(pyr: &MaxHeightPyramid, level: usize, p: DVec2, d: DVec3, w: i64, h: 
 /// cell reaches to infinity outward, but beyond the border texel's centre the clamped surface
 /// is constant along that axis, so the same single split is exact there too.
 #[expect(clippy::too_many_arguments, reason = "the ray, its segment, the cell and the gather cache")]
-fn leaf_hit(
+pub(crate) fn leaf_hit(
     f: &HeightField,
     edges: EdgeMode,
     o: DVec3,

@@ -280,7 +280,8 @@ fn parameters_are_validated_and_sanitized() {
     }
     assert!("pom-classic".parse::<Technique>().is_ok());
     assert!("POM".parse::<Technique>().is_ok());
-    assert!("cone".parse::<Technique>().unwrap_err().to_string().contains("pom-classic"));
+    assert_eq!("cone".parse::<Technique>(), Ok(Technique::Cone));
+    assert!("cones".parse::<Technique>().unwrap_err().to_string().contains("pom-classic"));
 }
 
 proptest! {
@@ -640,4 +641,82 @@ proptest! {
             }
         }
     }
+}
+
+#[test]
+fn cone_matches_brute_force_on_analytic_fields_at_every_angle() {
+    // With the conservative cones pomkit builds, cone stepping skips only empty space and solves
+    // the bilinear patches where it cannot skip: the hit is the exact one.
+    for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
+        for (name, f) in analytic_fields() {
+            let s = surface(f.clone(), edges);
+            for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
+                for ray in rays_over(24, angle, 7) {
+                    let hit = trace(&s, &ray, Technique::Cone, &params(edges));
+                    let truth = brute_force(&f, edges, &ray, 0.1);
+                    let err = texels(hit.uv, on_ray(&ray, truth, 0.1));
+                    assert!(
+                        err < 1e-3,
+                        "{name} {edges:?} {angle}deg {ray:?}: cone depth {} vs brute {truth}: {err} texels",
+                        hit.depth
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn cone_finds_what_exact_finds_on_the_built_in_maps_at_grazing_angles() {
+    // The two walks share nothing but the patch solver: a pyramid against cones.
+    for (pattern, edges) in
+        [(Pattern::Bricks, EdgeMode::Wrap), (Pattern::Cobblestones, EdgeMode::Clamp), (Pattern::Text, EdgeMode::Wrap)]
+    {
+        let s = Surface::new(generate(pattern, 128, 128), edges, 0.1);
+        let p = params(edges);
+        for angle in [75.0f32, 85.0, 89.0] {
+            for ray in rays_over(300, angle, 11) {
+                let (a, b) = (trace(&s, &ray, Technique::Cone, &p), trace(&s, &ray, Technique::Exact, &p));
+                let err = ((a.uv - b.uv) * 128.0).length();
+                assert!(
+                    err < 1e-3,
+                    "{pattern:?} {edges:?} {angle}deg {ray:?}: cone {} exact {}: {err} texels",
+                    a.depth,
+                    b.depth
+                );
+                assert!(
+                    a.fetches <= Technique::Cone.fetch_bound(&p, &s),
+                    "{pattern:?} {angle}deg: {} fetches",
+                    a.fetches
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_baked_cone_map_read_back_gives_the_same_hits() {
+    // A map read from its 16-bit image counts as relaxed (the tracer looks after each cone step);
+    // its quantized cones are still conservative, so the hits stay exact.
+    let f = generate(Pattern::Cobblestones, 96, 96);
+    let built = Surface::new(f.clone(), EdgeMode::Wrap, 0.1);
+    let samples = built.cones().to_gray_alpha16();
+    let mut read = Surface::new(f, EdgeMode::Wrap, 0.1);
+    read.set_cones(pomkit_core::cone::ConeMap::from_gray_alpha16(96, 96, EdgeMode::Wrap, &samples).unwrap()).unwrap();
+    assert!(read.cones().relaxed() && !built.cones().relaxed());
+    let p = params(EdgeMode::Wrap);
+    let (mut looked, mut plain) = (0, 0);
+    for angle in [30.0f32, 75.0, 89.0] {
+        for ray in rays_over(200, angle, 3) {
+            let (a, b) = (trace(&read, &ray, Technique::Cone, &p), trace(&built, &ray, Technique::Exact, &p));
+            assert!(((a.uv - b.uv) * 96.0).length() < 1e-3, "{angle}deg {ray:?}: read {} exact {}", a.depth, b.depth);
+            looked += a.fetches;
+            plain += trace(&built, &ray, Technique::Cone, &p).fetches;
+        }
+    }
+    assert!(looked > plain, "the relaxed reading looks after its cone steps ({looked} vs {plain} fetches)");
+    // A map of another size is refused, naming both sizes.
+    let other = pomkit_core::cone::ConeMap::from_gray_alpha16(2, 1, EdgeMode::Wrap, &[0; 4]).unwrap();
+    let err = Surface::new(generate(Pattern::Cobblestones, 8, 8), EdgeMode::Wrap, 0.1).set_cones(other).unwrap_err();
+    assert!(err.to_string().contains("2x1") && err.to_string().contains("8x8"), "{err}");
 }

@@ -297,6 +297,9 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
     for m in &scene.materials {
         if let Some(f) = &m.height {
             materials += u64::from(f.width()) * u64::from(f.height()) * HEIGHT_BYTES_PER_TEXEL;
+            if opts.mode.technique(m.technique) == Technique::Cone {
+                materials += pomkit_core::cone::ConeMap::build_bytes(f.width(), f.height());
+            }
         }
         let albedo = m.albedo.as_ref().map_or(1, |t| u64::from(t.width()) * u64::from(t.height()));
         materials += albedo * ALBEDO_BYTES_PER_TEXEL;
@@ -314,8 +317,15 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
         .map(|m| {
             let technique = opts.mode.technique(m.technique);
             let params = m.trace.sanitized();
-            let surface =
-                m.height.as_ref().map(|f| Arc::new(Surface::new((**f).clone(), params.edges, params.depth_scale)));
+            let surface = m.height.as_ref().map(|f| {
+                let mut surface = Surface::new((**f).clone(), params.edges, params.depth_scale);
+                if technique == Technique::Cone {
+                    // Built once per height field (on every core), not inside the first pixel's
+                    // trace nor again for the next frame. The size matches by construction.
+                    let _ = surface.set_cones(pomkit_core::cone::cached(f, params.edges));
+                }
+                Arc::new(surface)
+            });
             let normals = match (&m.normal_map, &m.height) {
                 (Some(n), _) => Some(n.clone()),
                 (None, Some(f)) if f.width() >= 2 && f.height() >= 2 => {

@@ -33,6 +33,9 @@ const POMKIT_POM_CLASSIC: u32 = 5u;
 const POMKIT_POM: u32 = 6u;
 const POMKIT_RELIEF: u32 = 7u;
 const POMKIT_EXACT: u32 = 8u;
+/// `cone`: cone stepping on the cones in the pyramid's mip 0 (cone.wesl), exact's walk where
+/// there are none. The same hits as `exact`.
+const POMKIT_CONE: u32 = 9u;
 
 const POMKIT_SHADOW_NONE: u32 = 0u;
 const POMKIT_SHADOW_HARD: u32 = 1u;
@@ -62,7 +65,7 @@ const POMKIT_BIG: f32 = 1e30;
 /// 4-byte scalars), written by `pomkit_gpu::library::PomkitParams`. The meaning, range and
 /// default of each is pomkit_core's `TraceParams` (docs/SCENES.md).
 struct PomkitParams {
-    /// Which technique `pomkit_trace` runs (`POMKIT_FLAT` .. `POMKIT_EXACT`).
+    /// Which technique `pomkit_trace` runs (`POMKIT_FLAT` .. `POMKIT_CONE`).
     technique: u32,
     /// Which self-shadow `pomkit_shadow` computes (`POMKIT_SHADOW_*`).
     shadow_mode: u32,
@@ -378,6 +381,42 @@ fn pomkit_exit_time(c: PomkitCell, o: vec3<f32>, d: vec3<f32>, t: f32, t1: f32) 
     return max(te, t);
 }
 
+/// The cell of `level` the ray enters at `t`, with a probe point inside it and the time the ray
+/// leaves it, strictly after `t` (trace.rs `entered_cell`); `ok` is false when no wall ahead can
+/// be told from the current point in f32.
+struct PomkitEntered {
+    cell: PomkitCell,
+    probe: vec2<f32>,
+    t_exit: f32,
+    ok: bool,
+}
+
+fn pomkit_entered_cell(map: PomkitMap, level: u32, o: vec3<f32>, d: vec3<f32>, t: f32, t1: f32) -> PomkitEntered {
+    var probe = (o + d * t).xy;
+    var c = pomkit_cell_at(map, level, probe, d);
+    var t_exit = pomkit_exit_time(c, o, d, t, t1);
+    if !(t_exit > t) && t < t1 {
+        // Rounding put the point on the wrong side of a wall the ray is leaving: step half a
+        // texel across it.
+        if d.x > 0.0 && (c.hi.x - o.x) / d.x <= t {
+            probe.x = c.hi.x + 0.5;
+        } else if d.x < 0.0 && (c.lo.x - o.x) / d.x <= t {
+            probe.x = c.lo.x - 0.5;
+        }
+        if d.y > 0.0 && (c.hi.y - o.y) / d.y <= t {
+            probe.y = c.hi.y + 0.5;
+        } else if d.y < 0.0 && (c.lo.y - o.y) / d.y <= t {
+            probe.y = c.lo.y - 0.5;
+        }
+        c = pomkit_cell_at(map, level, probe, d);
+        t_exit = pomkit_exit_time(c, o, d, t, t1);
+        if !(t_exit > t) {
+            return PomkitEntered(c, probe, t_exit, false);
+        }
+    }
+    return PomkitEntered(c, probe, t_exit, true);
+}
+
 /// The 2x2 sibling block holding cell `c` (one gather reads all four).
 fn pomkit_block_key(map: PomkitMap, c: PomkitCell, level: u32) -> vec2<i32> {
     if map.edges == POMKIT_WRAP {
@@ -524,28 +563,13 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
         if t > t1 {
             break;
         }
-        var probe = (o + d * t).xy;
-        var c = pomkit_cell_at(map, level, probe, d);
-        var t_exit = pomkit_exit_time(c, o, d, t, t1);
-        if !(t_exit > t) && t < t1 {
-            // Rounding put the point on the wrong side of a wall the ray is leaving: step half a
-            // texel across it (trace.rs `entered_cell`).
-            if d.x > 0.0 && (c.hi.x - o.x) / d.x <= t {
-                probe.x = c.hi.x + 0.5;
-            } else if d.x < 0.0 && (c.lo.x - o.x) / d.x <= t {
-                probe.x = c.lo.x - 0.5;
-            }
-            if d.y > 0.0 && (c.hi.y - o.y) / d.y <= t {
-                probe.y = c.hi.y + 0.5;
-            } else if d.y < 0.0 && (c.lo.y - o.y) / d.y <= t {
-                probe.y = c.lo.y - 0.5;
-            }
-            c = pomkit_cell_at(map, level, probe, d);
-            t_exit = pomkit_exit_time(c, o, d, t, t1);
-            if !(t_exit > t) {
-                break;
-            }
+        let entered = pomkit_entered_cell(map, level, o, d, t, t1);
+        if !entered.ok {
+            break;
         }
+        let c = entered.cell;
+        let probe = entered.probe;
+        let t_exit = entered.t_exit;
         let key = pomkit_block_key(map, c, level);
         let slot = min(level, 15u);
         if any(blocks[slot] != key) {
@@ -585,6 +609,67 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
             break;
         }
         t = t_exit;
+    }
+    return PomkitWalk(-1.0, state.fetches);
+}
+
+// ===== module cone =====
+
+// pomkit shader library: the `cone` technique's walk, the twin of pomkit_core cone.rs
+// `first_hit` (docs/REFERENCES.md: Dummer 2006; Bán et al. 2024 for cones that hold for the
+// bilinear surface).
+//
+// The cone map lives in the pyramid texture's mip 0: red is each texel footprint's top (the
+// least depth of the surface over it, the pyramid's level 0), green its cone ratio in texels per
+// unit depth (pomkit_gpu's `HeightMaps::write_cones`). The cones were built for the depths before
+// their rounding to f16, so the walk lowers each top by POMKIT_CONE_TOP_MARGIN, three times that
+// rounding: the cones then hold for the surface sampled here. A ratio of 0 means the pyramid
+// has no cones: the walk is then exact's.
+//
+// Above a footprint's top the ray advances by the longer of the cone step and the stretch over
+// the footprint to its top or its far edge; at or below the top it solves the bilinear patches
+// there (as exact does at level 0). Conservative cones skip only empty space: the hit is exact.
+
+
+/// How far the walk lowers a cone's top: three times the largest rounding of a depth in [0, 1]
+/// to f16 (2^-12), so that a cone built for f32 depths holds for the f16 surface.
+const POMKIT_CONE_TOP_MARGIN: f32 = 0.000732421875;
+
+/// First t in [t0, t1] where the ray o + t d (texel x, y; depth z, going down) is at or below
+/// the bilinear surface, by cone stepping on the cones in `pyramid`'s mip 0; t = -1 when none.
+fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> PomkitWalk {
+    var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
+    let horizontal = length(d.xy);
+    var t = t0;
+    for (var it = 0u; it < POMKIT_EXACT_MAX_STEPS; it++) {
+        if t >= t1 {
+            break;
+        }
+        let entered = pomkit_entered_cell(map, 0u, o, d, t, t1);
+        if !entered.ok {
+            break;
+        }
+        let c = entered.cell;
+        let cone = textureLoad(pyramid, vec2<i32>(c.ix, c.iy), 0).rg;
+        state.fetches += 1u;
+        if cone.y <= 0.0 {
+            // No cone map here: exact's walk from this point on.
+            let rest = pomkit_exact_first_hit(heights, pyramid, map, o, d, t, t1);
+            return PomkitWalk(rest.t, state.fetches + rest.fetches);
+        }
+        let top = cone.x - POMKIT_CONE_TOP_MARGIN;
+        let z = o.z + d.z * t;
+        if z < top {
+            let step = (top - z) / (d.z + horizontal / cone.y);
+            let column = min((top - o.z) / d.z, entered.t_exit) - t;
+            t = min(t + max(step, column), t1);
+            continue;
+        }
+        let h = pomkit_leaf_hit(heights, map, &state, o, d, t, min(entered.t_exit, t1), c);
+        if h >= 0.0 {
+            return PomkitWalk(h, state.fetches);
+        }
+        t = entered.t_exit;
     }
     return PomkitWalk(-1.0, state.fetches);
 }
@@ -863,12 +948,27 @@ fn pomkit_entry_tile(uv: vec2<f32>, edges: u32) -> vec2<f32> {
 }
 
 fn pomkit_trace_exact(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>) -> PomkitHit {
+    return pomkit_trace_walk(heights, pyramid, params, uv0, dir, false);
+}
+
+/// Cone stepping (cone.wesl) on the cones in `pyramid`'s mip 0 (green), or exact's walk where
+/// the pyramid has none: the exact hit either way.
+fn pomkit_trace_cone(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>) -> PomkitHit {
+    return pomkit_trace_walk(heights, pyramid, params, uv0, dir, true);
+}
+
+fn pomkit_trace_walk(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, cones: bool) -> PomkitHit {
     let map = pomkit_map(heights, pyramid, params);
     let s = pomkit_ray_extent(dir, params.depth_scale);
     let tile = pomkit_entry_tile(uv0, map.edges);
     let o = vec3<f32>((uv0 - tile) * map.size, 0.0);
     let d = vec3<f32>(s * map.size, 1.0);
-    let walk = pomkit_exact_first_hit(heights, pyramid, map, o, d, 0.0, 1.0);
+    var walk: PomkitWalk;
+    if cones {
+        walk = pomkit_cone_first_hit(heights, pyramid, map, o, d, 0.0, 1.0);
+    } else {
+        walk = pomkit_exact_first_hit(heights, pyramid, map, o, d, 0.0, 1.0);
+    }
     var t = walk.t;
     if t < 0.0 {
         t = 1.0;
@@ -922,6 +1022,9 @@ fn pomkit_trace_in_tile(technique: u32, heights: texture_2d<f32>, pyramid: textu
         }
         case POMKIT_EXACT: {
             return pomkit_trace_exact(heights, pyramid, params, uv, dir);
+        }
+        case POMKIT_CONE: {
+            return pomkit_trace_cone(heights, pyramid, params, uv, dir);
         }
         default: {
             return PomkitHit(uv, 0.0, 0u);
@@ -1093,6 +1196,20 @@ fn pomkit_trace_curved(technique: u32, heights: texture_2d<f32>, pyramid: textur
             }
             t = hit.depth * bend.t_end;
             found = !(bend.exits != 0u && hit.depth >= 1.0);
+        }
+        case POMKIT_CONE: {
+            if bend.c == 0.0 {
+                // A flat surface: the cones hold for this straight ray.
+                hit = pomkit_trace_cone(heights, pyramid, params, uv0, dir);
+                t = hit.depth;
+                found = true;
+            } else {
+                // The cones hold for straight rays only: walk the bent one as exact does.
+                let r = pomkit_exact_curved(heights, pyramid, params, uv0, dir, bend);
+                hit = r.hit;
+                t = r.ray_depth;
+                found = !r.left;
+            }
         }
         case POMKIT_EXACT: {
             let r = pomkit_exact_curved(heights, pyramid, params, uv0, dir, bend);

@@ -127,8 +127,8 @@ impl GpuContext {
     }
 
     /// Reads mip `level` of a 2D texture with 16-byte texels (`Rgba32Float`) or 8-byte texels
-    /// (`Rgba16Float`) or 4-byte texels (`R32Float`, and the depth of `Depth32Float`), returning
-    /// its texels as `f32`s, rows packed. The texture needs `COPY_SRC` usage.
+    /// (`Rgba16Float`, `Rg32Float`) or 4-byte texels (`R32Float`, and the depth of
+    /// `Depth32Float`), returning its texels' channels as `f32`s, rows packed. The texture needs `COPY_SRC` usage.
     ///
     /// # Errors
     /// [`GpuError::Device`] as [`GpuContext::read_buffer`]; [`GpuError::Unsupported`] for another
@@ -137,6 +137,7 @@ impl GpuContext {
         let (bpp, channels, half) = match texture.format() {
             wgpu::TextureFormat::Rgba32Float => (16u32, 4usize, false),
             wgpu::TextureFormat::Rgba16Float => (8, 4, true),
+            wgpu::TextureFormat::Rg32Float => (8, 2, false),
             wgpu::TextureFormat::R32Float | wgpu::TextureFormat::Depth32Float => (4, 1, false),
             f => return Err(GpuError::Unsupported(format!("reading back {f:?} textures"))),
         };

@@ -63,9 +63,10 @@ pub struct HeightMaps {
     pub normals: wgpu::Texture,
     /// A view of `normals`.
     pub normals_view: wgpu::TextureView,
-    /// `R32Float` maximum-height (minimum-depth) pyramid, read with `textureLoad`: mip `l` holds
+    /// `Rg32Float` maximum-height (minimum-depth) pyramid, read with `textureLoad`: mip `l` holds
     /// pyramid level `l` (`MaxHeightPyramid::min_depth`) in its top-left
-    /// [`HeightMaps::pyramid_level_size`] texels.
+    /// [`HeightMaps::pyramid_level_size`] texels, in red. Green is 0, except in mip 0 of a map
+    /// given cones ([`HeightMaps::write_cones`]): there it holds each footprint's cone ratio.
     ///
     /// GPU mips halve rounding down but the pyramid halves rounding up, so the base is padded to
     /// `(next_power_of_two(w), next_power_of_two(h))`; the padding texels are never written (they
@@ -83,6 +84,10 @@ pub struct HeightMaps {
     /// `Rgba16Float` w x h: (d, parallax) of mip 0 on their way back into `heights` (a texture
     /// cannot be read and written in one dispatch; see `height.wgsl`, stage 1).
     scratch_view: wgpu::TextureView,
+    /// `R32Float`, one texel per footprint: the cone ratios the pyramid's level 0 carries in
+    /// green ([`HeightMaps::write_cones`]); 0 (no cones) until written.
+    cones: wgpu::Texture,
+    cones_view: wgpu::TextureView,
 }
 
 impl HeightMaps {
@@ -140,8 +145,10 @@ impl HeightMaps {
         };
         let heights = texture("heights", width, height, mips, wgpu::TextureFormat::Rgba16Float);
         let normals = texture("normals", width, height, 1, wgpu::TextureFormat::Rgba16Float);
-        let pyramid = texture("pyramid", pw, ph, pyramid_levels, wgpu::TextureFormat::R32Float);
+        let pyramid = texture("pyramid", pw, ph, pyramid_levels, wgpu::TextureFormat::Rg32Float);
         let scratch = texture("scratch", width, height, 1, wgpu::TextureFormat::Rgba16Float);
+        // Zero-initialised: no cones.
+        let cones = texture("cones", width, height, 1, wgpu::TextureFormat::R32Float);
         let level_views = |t: &wgpu::Texture| -> Vec<wgpu::TextureView> {
             (0..t.mip_level_count())
                 .map(|l| {
@@ -166,6 +173,8 @@ impl HeightMaps {
             pyramid,
             pyramid_levels,
             scratch_view: scratch.create_view(&Default::default()),
+            cones_view: cones.create_view(&Default::default()),
+            cones,
         })
     }
 
@@ -227,6 +236,52 @@ impl HeightMaps {
             },
             &rgba16f_bytes(&texels),
             wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(self.width * 8), rows_per_image: None },
+            wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+        );
+        Ok(())
+    }
+}
+
+impl HeightMaps {
+    /// Writes the cone ratios of `cones` (built for this map's depths,
+    /// [`pomkit_core::cone::ConeMap`]) for the height passes to put into the pyramid's level 0
+    /// (green), where the library's `cone` technique steps on them; `None` removes them (then
+    /// `cone` walks as `exact` does). They stay until replaced: remove them when the heights
+    /// change. Run [`HeightPasses::encode`] afterwards.
+    ///
+    /// The cones hold for the depths they were built from; the GPU samples them rounded to
+    /// f16, so the library lowers each top by `POMKIT_CONE_TOP_MARGIN` (three times that
+    /// rounding) before stepping: the cones then hold for the surface it samples.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] if the cones are not this map's size.
+    pub fn write_cones(&self, queue: &wgpu::Queue, cones: Option<&pomkit_core::cone::ConeMap>) -> Result<(), GpuError> {
+        if let Some(c) = cones
+            && c.size() != (self.width, self.height)
+        {
+            return Err(GpuError::Unsupported(format!(
+                "writing {}x{} cones into a {}x{} height map's pyramid",
+                c.size().0,
+                c.size().1,
+                self.width,
+                self.height
+            )));
+        }
+        let mut bytes = Vec::with_capacity(self.width as usize * self.height as usize * 4);
+        for y in 0..self.height {
+            for x in 0..self.width {
+                bytes.extend_from_slice(&cones.map_or(0.0, |c| c.ratio(x, y)).to_le_bytes());
+            }
+        }
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.cones,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            &bytes,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(self.width * 4), rows_per_image: None },
             wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
         );
         Ok(())
@@ -347,12 +402,17 @@ impl HeightPasses {
     pub fn new(device: &wgpu::Device) -> Self {
         let module = device.create_shader_module(wgpu::include_wgsl!("height.wgsl"));
         let rgba16 = Slot::Storage(wgpu::TextureFormat::Rgba16Float);
-        let r32 = Slot::Storage(wgpu::TextureFormat::R32Float);
+        let r32 = Slot::Storage(wgpu::TextureFormat::Rg32Float);
         Self {
             normals: Stage::new(device, &module, "normals_main", &[Slot::Texture, rgba16, rgba16, Slot::Params]),
             resolve: Stage::new(device, &module, "resolve_main", &[Slot::Texture, rgba16]),
             downsample: Stage::new(device, &module, "downsample_main", &[Slot::Texture, rgba16]),
-            pyramid_base: Stage::new(device, &module, "pyramid_base_main", &[Slot::Texture, r32, Slot::Params]),
+            pyramid_base: Stage::new(
+                device,
+                &module,
+                "pyramid_base_main",
+                &[Slot::Texture, r32, Slot::Params, Slot::Texture],
+            ),
             pyramid_reduce: Stage::new(device, &module, "pyramid_reduce_main", &[Slot::Texture, r32, Slot::Params]),
         }
     }
@@ -449,13 +509,17 @@ impl HeightPasses {
 
         // 3. The pyramid: level 0 from the depths, then each level from the one below it.
         for (l, &offset) in pyramid_params.iter().enumerate() {
-            let (stage, src) = if l == 0 {
-                (&self.pyramid_base, mip0)
-            } else {
-                (&self.pyramid_reduce, &maps.pyramid_level_views[l - 1])
-            };
             let dst = &maps.pyramid_level_views[l];
-            dispatch(stage, &[view(src), view(dst), record(offset)], maps.pyramid_level_size(l as u32));
+            let size = maps.pyramid_level_size(l as u32);
+            if l == 0 {
+                dispatch(&self.pyramid_base, &[view(mip0), view(dst), record(offset), view(&maps.cones_view)], size);
+            } else {
+                dispatch(
+                    &self.pyramid_reduce,
+                    &[view(&maps.pyramid_level_views[l - 1]), view(dst), record(offset)],
+                    size,
+                );
+            }
         }
     }
 }

@@ -256,8 +256,11 @@ fn downsample_main(@builtin(global_invocation_id) id: vec3<u32>) {
 // ---------------------------------------------------------------------------------------------
 
 @group(0) @binding(0) var p_src: texture_2d<f32>;
-@group(0) @binding(1) var p_dst: texture_storage_2d<r32float, write>;
+@group(0) @binding(1) var p_dst: texture_storage_2d<rg32float, write>;
 @group(0) @binding(2) var<uniform> p_params: Params;
+/// pyramid_base_main only: the cone ratio of each footprint (0 where there are none), copied into
+/// level 0's green channel for the library's `cone` technique.
+@group(0) @binding(3) var p_cones: texture_2d<f32>;
 
 /// Depth of texel (x, y) + (dx, dy) of heights mip 0, neighbours wrapped or clamped.
 fn p_depth(p: vec2<i32>, dx: i32, dy: i32) -> f32 {
@@ -291,7 +294,7 @@ fn pyramid_base_main(@builtin(global_invocation_id) id: vec3<u32>) {
     m = min(m, (c + r + u + ur) * 0.25);
     m = min(m, (c + l + b + bl) * 0.25);
     m = min(m, (c + r + b + br) * 0.25);
-    textureStore(p_dst, p, vec4<f32>(m, 0.0, 0.0, 0.0));
+    textureStore(p_dst, p, vec4<f32>(m, textureLoad(p_cones, p, 0).r, 0.0, 0.0));
 }
 
 @compute @workgroup_size(8, 8)

@@ -3,7 +3,7 @@
 //!
 //! The shader library ([`crate::library`]) traces against two textures and a sampler: `heights`
 //! (`Rgba16Float` with mips, R = depth, G = parallax value), read through a trilinear sampler
-//! whose address mode matches the edge mode, and the maximum-height `pyramid` (`R32Float`, read
+//! whose address mode matches the edge mode, and the maximum-height `pyramid` (`Rg32Float`, read
 //! with `textureLoad`). A [`HeightResource`] owns them (a [`HeightMaps`]) and the sampler, and
 //! builds them:
 //!
@@ -498,7 +498,7 @@ impl HeightResource {
         &self.maps.heights_view
     }
 
-    /// All mips of the maximum-height pyramid (`R32Float`, read with `textureLoad`): the
+    /// All mips of the maximum-height pyramid (`Rg32Float`, read with `textureLoad`): the
     /// library's `pyramid` texture.
     #[must_use]
     pub fn pyramid_view(&self) -> &wgpu::TextureView {
@@ -542,6 +542,22 @@ impl HeightResource {
     #[must_use]
     pub fn edges(&self) -> EdgeMode {
         self.opts.edges
+    }
+
+    /// Gives the library's `cone` technique its cones: `cones` must be built from the heights
+    /// this resource holds, with its edge mode (`pomkit_core::cone::ConeMap::conservative`, or
+    /// `cached`); `None` removes them. Run [`HeightResource::encode_rebuild`] afterwards: the
+    /// rebuild copies them into the pyramid. Without cones `cone` walks as `exact` does (the
+    /// same hits); remove them when the heights change.
+    ///
+    /// # Errors
+    /// [`crate::GpuError::Unsupported`] if the cones are not the resource's size.
+    pub fn write_cones(
+        &self,
+        queue: &wgpu::Queue,
+        cones: Option<&pomkit_core::cone::ConeMap>,
+    ) -> Result<(), crate::GpuError> {
+        self.maps.write_cones(queue, cones)
     }
 
     /// The options the resource was built with.

@@ -1,15 +1,15 @@
 //! pomkit's tracing as a WGSL library that other shaders import.
 //!
-//! The library is seven modules in WESL form under `crates/pomkit-gpu/shaders/pomkit/`
+//! The library is eight modules in WESL form under `crates/pomkit-gpu/shaders/pomkit/`
 //! ([`MODULES`]): `common` (constants, [`PomkitParams`] and the ray set-up), `lod` (mip level
-//! and LOD fade), `exact` (the exact tracer's walk), `trace` (every technique and the
+//! and LOD fade), `exact` (the exact tracer's walk), `cone` (the cone technique's walk), `trace` (every technique and the
 //! `pomkit_trace` dispatch), `silhouette` (tracing under a curved surface, for true outlines),
 //! `shadow` (hard, soft, exact and depth self-shadowing) and `depth` (pixel
 //! depth offset). Every function is pure: it reads heights only through the textures and
 //! sampler it is given, and no module has module-level variables.
 //!
 //! Two ways to use it:
-//! - **WESL** (Bevy 0.20, the `wesl` crate): put the seven files in a folder of your shader
+//! - **WESL** (Bevy 0.20, the `wesl` crate): put the eight files in a folder of your shader
 //!   package and `import package::pomkit::trace::pomkit_trace;` (the modules import each other
 //!   with `super::`, so the folder may sit anywhere).
 //! - **Plain WGSL** ([`WGSL`], the file `crates/pomkit-gpu/shaders/pomkit.wgsl`): the modules
@@ -28,10 +28,11 @@ use crate::util::Std140;
 
 /// The library's modules in WESL form, as (module name, source), each after the modules it
 /// imports.
-pub const MODULES: [(&str, &str); 7] = [
+pub const MODULES: [(&str, &str); 8] = [
     ("common", include_str!("../shaders/pomkit/common.wesl")),
     ("lod", include_str!("../shaders/pomkit/lod.wesl")),
     ("exact", include_str!("../shaders/pomkit/exact.wesl")),
+    ("cone", include_str!("../shaders/pomkit/cone.wesl")),
     ("trace", include_str!("../shaders/pomkit/trace.wesl")),
     ("silhouette", include_str!("../shaders/pomkit/silhouette.wesl")),
     ("shadow", include_str!("../shaders/pomkit/shadow.wesl")),
@@ -90,6 +91,7 @@ pub const fn technique_index(t: Technique) -> u32 {
         Technique::Pom => 6,
         Technique::Relief => 7,
         Technique::Exact => 8,
+        Technique::Cone => 9,
     }
 }
 

@@ -204,7 +204,7 @@ impl MaterialPipelines {
         let dummy = DummyTextures {
             heights: one("pomkit no height", wgpu::TextureFormat::Rgba16Float, rgba16f_bytes(&[0.0; 4])),
             normals: one("pomkit no normals", wgpu::TextureFormat::Rgba16Float, rgba16f_bytes(&[0.0, 0.0, 1.0, 0.0])),
-            pyramid: one("pomkit no pyramid", wgpu::TextureFormat::R32Float, 0f32.to_le_bytes().to_vec()),
+            pyramid: one("pomkit no pyramid", wgpu::TextureFormat::Rg32Float, [0u8; 8].to_vec()),
         };
         Self {
             shader,
@@ -518,6 +518,10 @@ impl GpuMaterial {
             Some(field) => {
                 let maps = HeightMaps::new(ctx, field.width(), field.height(), &material.name)?;
                 maps.upload_depths(ctx, field.depths())?;
+                if technique == Technique::Cone {
+                    // The cones `cone` steps on, built on the CPU (pomkit_core::cone).
+                    maps.write_cones(&ctx.queue, Some(&pomkit_core::cone::cached(field, p.edges)))?;
+                }
                 Some(maps)
             }
             None => None,
@@ -773,7 +777,12 @@ impl GpuMaterial {
                 field.height()
             )));
         }
-        maps.upload_depths(ctx, field.depths())
+        maps.upload_depths(ctx, field.depths())?;
+        // The cones described the old heights: `cone` walks as `exact` does from now on.
+        if self.technique == Technique::Cone {
+            maps.write_cones(&ctx.queue, None)?;
+        }
+        Ok(())
     }
 }
 

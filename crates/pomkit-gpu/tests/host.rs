@@ -147,7 +147,11 @@ fn read_back(ctx: &GpuContext, r: &HeightResource) -> Readback {
             let texels = ctx.read_texture(&maps.pyramid, l).unwrap();
             let stride = (maps.pyramid.width() >> l).max(1) as usize;
             let (cw, ch) = maps.pyramid_level_size(l);
-            (0..ch as usize).flat_map(|y| texels[y * stride..y * stride + cw as usize].to_vec()).collect()
+            // Red holds the bound, green the cones (none here).
+            (0..ch as usize)
+                .flat_map(|y| (0..cw as usize).map(move |x| (y, x)))
+                .map(|(y, x)| texels[2 * (y * stride + x)])
+                .collect()
         })
         .collect();
     Readback { heights, normals, pyramid }

@@ -62,17 +62,15 @@ fn surface(ctx: &GpuContext, passes: &HeightPasses, pattern: Pattern, edges: Edg
     let params = trace_params(edges);
     let maps = HeightMaps::new(ctx, SIZE, SIZE, pattern.name()).expect("a 256x256 map fits");
     maps.upload_depths(ctx, field.depths()).expect("one depth per texel");
+    // The cones of the surface both sides trace, as the renderer writes them.
+    let cpu = Surface::new(field, edges, params.depth_scale);
+    maps.write_cones(&ctx.queue, Some(cpu.cones())).expect("the cones fit");
     let opts = HeightPassOptions { edges, depth_scale: params.depth_scale, ..HeightPassOptions::default() };
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     passes.encode(&ctx.device, &mut encoder, &maps, &opts, None);
     ctx.queue.submit([encoder.finish()]);
     ctx.wait().expect("device lost");
-    Both {
-        name: format!("{} {SIZE}x{SIZE} {edges:?}", pattern.name()),
-        cpu: Surface::new(field, edges, params.depth_scale),
-        gpu: maps,
-        params,
-    }
+    Both { name: format!("{} {SIZE}x{SIZE} {edges:?}", pattern.name()), cpu, gpu: maps, params }
 }
 
 /// `f` over `items` on two threads (the CPU side of a comparison; the machine has 2 cores).
@@ -209,6 +207,10 @@ const EXACT_SHARE_WALLS: f64 = EXACT_SHARE;
 const EXACT_SHARE_STEEPENED: f64 = EXACT_SHARE;
 /// `exact`'s fetch totals agree within this factor.
 const EXACT_FETCHES: f64 = 0.03;
+/// The same for `cone`: the GPU's cone tops lie `POMKIT_CONE_TOP_MARGIN` below the CPU's
+/// (so that they hold for the f16 heights), which makes its steps a little shorter and its
+/// leaves a little more frequent (measured: at most 1.046, on bricks at 85 to 89.5 degrees).
+const CONE_FETCHES: f64 = 0.08;
 
 /// What the comparison of `t` on `set` breaks, if anything (empty when it passes).
 fn trace_violations(t: Technique, s: &TraceStats, set: &RaySet) -> Vec<String> {
@@ -223,7 +225,9 @@ fn trace_violations(t: Technique, s: &TraceStats, set: &RaySet) -> Vec<String> {
                 v.push("flat/normal must hit at the entry point, depth 0, no fetch".into());
             }
         }
-        Technique::Exact => {
+        // Both exact walks: the GPU's in f32 (cone's on tops lowered by the f16 margin), the
+        // CPU's in f64, so the hits agree as exact's do and the fetch totals nearly.
+        Technique::Exact | Technique::Cone => {
             let over = s.share_over(1.0 + set.uv_slack);
             if over > set.exact_share {
                 v.push(format!(
@@ -232,8 +236,9 @@ fn trace_violations(t: Technique, s: &TraceStats, set: &RaySet) -> Vec<String> {
                     share(set.exact_share)
                 ));
             }
-            if (s.fetch_ratio() - 1.0).abs() > EXACT_FETCHES {
-                v.push(format!("fetch totals GPU/CPU {:.4} (allowed 1 +- {EXACT_FETCHES})", s.fetch_ratio()));
+            let allowed = if t == Technique::Cone { CONE_FETCHES } else { EXACT_FETCHES };
+            if (s.fetch_ratio() - 1.0).abs() > allowed {
+                v.push(format!("fetch totals GPU/CPU {:.4} (allowed 1 +- {allowed})", s.fetch_ratio()));
             }
         }
         _ => {

@@ -13,7 +13,8 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use image::{DynamicImage, ImageEncoder};
-use pomkit_core::{HeightField, HeightFieldError};
+use pomkit_core::cone::ConeMap;
+use pomkit_core::{EdgeMode, HeightField, HeightFieldError};
 
 #[doc(hidden)]
 pub mod fuzz_entry;
@@ -214,6 +215,14 @@ pub enum IoError {
         /// The encoder's reason.
         reason: image::ImageError,
     },
+    /// The image is not a cone map, or not this height map's.
+    #[error("{} is not a cone map for this height map: {reason}", crate::shown(path))]
+    ConeMap {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
     /// The pixels do not form a valid height field.
     #[error("{}: {reason}", crate::shown(path))]
     Field {
@@ -268,6 +277,38 @@ pub enum IoError {
         /// The reason.
         reason: pomkit_core::memory::MemoryError,
     },
+}
+
+/// Reads a cone map baked by `pomkit bake cone` (a 16-bit grey + alpha PNG: grey the footprint's
+/// top as a height, alpha the square root of the cone ratio over the shorter side) for a
+/// `width` x `height` height map traced with `edges` (the map must have been baked with the same
+/// `--edges`, which the file does not record). The cones are read as relaxed
+/// ([`pomkit_core::cone::ConeMap::from_gray_alpha16`]).
+///
+/// # Errors
+/// [`IoError::ConeMap`] for an image that is not 16-bit grey + alpha or is not `width` x
+/// `height`, naming the file; the errors of [`read::read_image_file`] and
+/// [`read::decode_image_limited`] for unreadable files.
+pub fn load_cone_map(path: &Path, width: u32, height: u32, edges: EdgeMode) -> Result<ConeMap, IoError> {
+    let bytes = read::read_image_file(path)?;
+    let image = read::decode_image_limited(&bytes, path, 8)?;
+    let bad = |reason: String| IoError::ConeMap { path: path.to_owned(), reason };
+    let DynamicImage::ImageLumaA16(la) = image else {
+        return Err(bad(format!(
+            "its pixels are {:?}, and a cone map's are 16-bit grey + alpha (grey the top, alpha the cone), as \
+             `pomkit bake cone` writes them",
+            image.color()
+        )));
+    };
+    if la.dimensions() != (width, height) {
+        return Err(bad(format!(
+            "it is {}x{} but the height map is {width}x{height}; bake the cone map from this height map \
+             (`pomkit bake cone`)",
+            la.width(),
+            la.height()
+        )));
+    }
+    ConeMap::from_gray_alpha16(width, height, edges, la.as_raw()).map_err(|e| bad(e.to_string()))
 }
 
 /// Reads a height map from `path`.

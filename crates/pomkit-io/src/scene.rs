@@ -49,13 +49,13 @@
 //! normal_y_down = false             # the normal map is DirectX-style (+Y down)
 //! base_color = [0.8, 0.8, 0.8]      # multiplies the albedo
 //! technique = "pom"                 # flat, normal, parallax, iterative, steep, pom-classic,
-//!                                   # pom, relief or exact
+//!                                   # pom, relief, exact or cone
 //! depth_scale = 0.1                 # depth of the deepest point, in UV units; > 0, <= 16
 //! min_samples = 8                   # pom: fewest samples (head-on)
 //! max_samples = 32                  # pom: most samples (grazing); >= min_samples
 //! samples = 32                      # steep, relief: depth planes
 //! iterations = 4                    # iterative: parallax steps
-//! binary_steps = 6                  # relief: binary refinement steps
+//! binary_steps = 6                  # relief, cone: binary refinement steps
 //! refine = 0                        # pom: secant refinement steps
 //! perspective_bias = 1.0            # pom-classic: 0 to 1 (1 = the exact parallax length)
 //! edges = "wrap"                    # wrap or clamp: texture addressing

@@ -49,8 +49,8 @@ pub struct Param {
     pub doc: &'static str,
 }
 
-const TECHNIQUES: [&str; 9] =
-    ["flat", "normal", "parallax", "iterative", "steep", "pom-classic", "pom", "relief", "exact"];
+const TECHNIQUES: [&str; 10] =
+    ["flat", "normal", "parallax", "iterative", "steep", "pom-classic", "pom", "relief", "exact", "cone"];
 const SHADOWS: [&str; 5] = ["none", "hard", "soft", "exact", "depth"];
 
 /// The technique and its parameters, in panel order.
@@ -69,7 +69,10 @@ pub const TECHNIQUE_PARAMS: [Param; 9] = [
               piecewise-linear intersection, optional secant refinement.\n\
               relief: relief mapping (Policarpo 2005): linear then binary search.\n\
               exact: the exact first hit on the bilinear height surface (max-height pyramid); never \
-              misses a feature.",
+              misses a feature.\n\
+              cone: cone stepping (Dummer 2006) on conservative cones that hold for the bilinear \
+              surface, with the patches solved where the cones cannot skip: exact's hits. On the GPU \
+              (this viewer) it runs exact's walk until its WGSL port lands.",
     },
     Param {
         key: "depth_scale",
@@ -335,6 +338,8 @@ pub fn param_control(ui: &mut Ui, doc: &mut SceneDoc, p: &Param) -> bool {
             let no_height = p.key == "technique" && doc.material_field("height").is_none();
             egui::ComboBox::from_id_salt(p.key)
                 .selected_text(&selected)
+                // Tall enough for every technique without a scroll bar.
+                .height(400.0)
                 .show_ui(ui, |ui| {
                     for o in options {
                         let ok = !no_height || matches!(*o, "flat" | "normal");
