@@ -720,3 +720,73 @@ fn a_baked_cone_map_read_back_gives_the_same_hits() {
     let err = Surface::new(generate(Pattern::Cobblestones, 8, 8), EdgeMode::Wrap, 0.1).set_cones(other).unwrap_err();
     assert!(err.to_string().contains("2x1") && err.to_string().contains("8x8"), "{err}");
 }
+
+#[test]
+fn directional_cones_keep_cone_exact_and_cost_fewer_fetches() {
+    // Cones per direction quadrant ignore the surface behind and beside the ray: wider, and
+    // still never skipping surface, so the hits stay exact's.
+    for (pattern, edges) in [(Pattern::Cobblestones, EdgeMode::Wrap), (Pattern::Bricks, EdgeMode::Clamp)] {
+        let f = generate(pattern, 128, 128);
+        let plain = Surface::new(f.clone(), edges, 0.1);
+        let mut ahead = Surface::new(f.clone(), edges, 0.1);
+        ahead.set_cones(pomkit_core::cone::ConeMap::directional(&f, edges)).unwrap();
+        let p = params(edges);
+        let (mut a_fetches, mut p_fetches) = (0, 0);
+        for angle in [30.0f32, 75.0, 85.0, 89.0] {
+            for ray in rays_over(300, angle, 13) {
+                let (a, e) = (trace(&ahead, &ray, Technique::Cone, &p), trace(&plain, &ray, Technique::Exact, &p));
+                let err = ((a.uv - e.uv) * 128.0).length();
+                assert!(
+                    err < 1e-3,
+                    "{pattern:?} {edges:?} {angle}deg {ray:?}: {} vs exact {}: {err} texels",
+                    a.depth,
+                    e.depth
+                );
+                a_fetches += a.fetches;
+                p_fetches += trace(&plain, &ray, Technique::Cone, &p).fetches;
+            }
+        }
+        eprintln!("{pattern:?}: directional {a_fetches} isotropic {p_fetches}");
+        assert!(a_fetches < p_fetches, "{pattern:?}: directional {a_fetches} vs isotropic {p_fetches} fetches");
+    }
+}
+
+/// docs/ACCURACY.md's directional-cone row: mean fetches per ray of pom (8 to 50 samples),
+/// exact, and cone on isotropic and on directional cones, on every built-in map at 512x512,
+/// over `pomkit compare`'s ray sets.
+#[test]
+#[ignore = "a measurement (a minute in release): cargo test --release -p pomkit-core --test trace_analytic cone_fetch_table -- --ignored --nocapture"]
+fn cone_fetch_table() {
+    use pomkit_core::accuracy::ray_set;
+    println!("| map | angle | pom | exact | cone | cone, directional |");
+    println!("|---|--:|--:|--:|--:|--:|");
+    for pattern in [
+        Pattern::Cobblestones,
+        Pattern::Bricks,
+        Pattern::Pyramids,
+        Pattern::Text,
+        Pattern::Waves,
+        Pattern::Fur,
+        Pattern::Grass,
+    ] {
+        let f = generate(pattern, 512, 512);
+        let plain = Surface::new(f.clone(), EdgeMode::Wrap, 0.1);
+        let mut ahead = Surface::new(f.clone(), EdgeMode::Wrap, 0.1);
+        ahead.set_cones(pomkit_core::cone::ConeMap::directional(&f, EdgeMode::Wrap)).unwrap();
+        let p = TraceParams { max_samples: 50, ..TraceParams::default() };
+        for angle in [75.0f32, 85.0] {
+            let rays = ray_set(angle, 2000, 1);
+            let mean = |s: &Surface, t: Technique| {
+                rays.iter().map(|r| f64::from(trace(s, r, t, &p).fetches)).sum::<f64>() / rays.len() as f64
+            };
+            println!(
+                "| {} | {angle}° | {:.1} | {:.1} | {:.1} | {:.1} |",
+                pattern.name(),
+                mean(&plain, Technique::Pom),
+                mean(&plain, Technique::Exact),
+                mean(&plain, Technique::Cone),
+                mean(&ahead, Technique::Cone)
+            );
+        }
+    }
+}
