@@ -259,7 +259,7 @@ fn default_template(kind: Kind) -> &'static str {
         Kind::Parallax(_) => "{stem}_parallax.{ext}",
         Kind::Pack => "{stem}_packed.{ext}",
         Kind::Maxmip => "{stem}_maxmip.{ext}",
-        Kind::Cone => "{stem}_cone.{ext}",
+        Kind::Cone { .. } => "{stem}_cone.{ext}",
     }
 }
 
@@ -466,7 +466,7 @@ impl Rules {
             let edges = choice::<EdgesArg>(r.edges.as_deref(), || at("edges"))?;
             let channel = choice::<ChannelArg>(r.channel.as_deref(), || at("channel"))?;
             let rule_kind = match kind {
-                Kind::Pack | Kind::Maxmip | Kind::Cone => None,
+                Kind::Pack | Kind::Maxmip | Kind::Cone { .. } => None,
                 Kind::Normal(_) => {
                     choice::<NormalEncoding>(r.encoding.as_deref(), || at("encoding"))?.map(Kind::Normal)
                 }

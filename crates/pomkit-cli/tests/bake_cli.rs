@@ -307,3 +307,55 @@ fn cone_map_cones_hold_no_point_of_the_bilinear_surface() {
         assert!(mean > 0.88, "{name}: cones only {mean} of the widest");
     }
 }
+
+/// `bake cone --relaxed`: 16-bit grey + alpha like the conservative map, the same tops, cones
+/// no narrower than the search's tolerance allows (both builds stop within a factor
+/// `(1 - SLACK) / (1 + FAR)` = 0.75 of their exact answers, and the exact relaxed cone is never
+/// the narrower) and wider on average on cobblestones; and `compare --cone-map` steps on
+/// them with hits within half a texel of exact's on all but a few rays.
+#[test]
+fn relaxed_cone_maps_are_wider_and_trace_close_to_exact() {
+    let dir = tempfile::tempdir().unwrap();
+    let height = "builtin:cobblestones:96x96";
+    for (args, what) in [
+        (vec!["bake", "cone", height, "-o", "c.png"], "conservative"),
+        (vec!["bake", "cone", height, "--relaxed", "-o", "r.png"], "relaxed"),
+    ] {
+        let out = pomkit(&args, dir.path());
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(stderr(&out).contains(what), "{}", stderr(&out));
+    }
+    let c = image::open(dir.path().join("c.png")).unwrap().to_luma_alpha16();
+    let r = image::open(dir.path().join("r.png")).unwrap().to_luma_alpha16();
+    let (mut wider, mut n) = (0.0, 0.0);
+    for (pc, pr) in c.pixels().zip(r.pixels()) {
+        assert_eq!(pc.0[0], pr.0[0], "the same tops");
+        let ratio = (f64::from(pr.0[1]) / f64::from(pc.0[1]).max(1.0)).powi(2);
+        assert!(ratio >= 0.75, "a relaxed cone {ratio} times as wide as the conservative one");
+        wider += ratio;
+        n += 1.0;
+    }
+    assert!(wider / n > 1.5, "relaxed cones only {:.2} times as wide", wider / n);
+    let out = pomkit(
+        &[
+            "compare",
+            "--height",
+            height,
+            "--techniques",
+            "cone",
+            "--cone-map",
+            "r.png",
+            "--format",
+            "csv",
+            "--rays",
+            "500",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = String::from_utf8_lossy(&out.stdout).into_owned();
+    for row in table.lines().skip(1).filter(|l| l.starts_with("cone,")) {
+        let share: f64 = row.split(',').nth(5).unwrap().parse().unwrap();
+        assert!(share <= 0.02, "relaxed cone stepping over a texel from exact on {share} of the rays: {row}");
+    }
+}

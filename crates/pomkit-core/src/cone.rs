@@ -137,6 +137,34 @@ impl ConeMap {
     /// As [`ConeMap::conservative`], calling `progress(rows)` as each row of footprints is done.
     #[must_use]
     pub fn conservative_with_progress(field: &HeightField, edges: EdgeMode, progress: &(dyn Fn(u32) + Sync)) -> Self {
+        Self::build(field, edges, false, progress)
+    }
+
+    /// Relaxed cones (Policarpo and Oliveira 2007), built exactly for the bilinear surface: per
+    /// footprint the widest cone above its top in which no ray that starts on the top plane
+    /// (depth 0) over the footprint can leave the surface after entering it, so such a ray
+    /// crosses the surface at most once inside the cone ([`ConeMap::relaxed`] is true: a tracer
+    /// looks after each step, and searches the step that went under). Each ratio is at least the
+    /// conservative one. The same branch and bound, where a rectangle of surface counts only if
+    /// a ray from the footprint's top plane may leave the surface in it (the surface falls away
+    /// there faster than such a ray descends). The search's tolerance is the conservative
+    /// one's, so a footprint's relaxed ratio may come out below its conservative ratio (by at
+    /// most that tolerance) where the two exact ratios are equal.
+    ///
+    /// The guarantee is for rays from the top plane, as Policarpo and Oliveira's: a walk's later
+    /// steps start deeper, and may step over a thin feature.
+    #[must_use]
+    pub fn relaxed_cones(field: &HeightField, edges: EdgeMode) -> Self {
+        Self::build(field, edges, true, &|_| {})
+    }
+
+    /// As [`ConeMap::relaxed_cones`], calling `progress(rows)` as each row is done.
+    #[must_use]
+    pub fn relaxed_with_progress(field: &HeightField, edges: EdgeMode, progress: &(dyn Fn(u32) + Sync)) -> Self {
+        Self::build(field, edges, true, progress)
+    }
+
+    fn build(field: &HeightField, edges: EdgeMode, relaxed: bool, progress: &(dyn Fn(u32) + Sync)) -> Self {
         let (w, h) = (field.width(), field.height());
         let pyramid = MaxHeightPyramid::new(field, edges);
         let search = Search::new(field, &pyramid, edges);
@@ -146,7 +174,7 @@ impl ConeMap {
                 let mut witness = None;
                 let row = (0..w)
                     .map(|i| {
-                        let (ratio, q) = search.ratio(i, j, witness);
+                        let (ratio, q) = search.ratio_ahead(i, j, witness, None, relaxed);
                         witness = q.or(witness);
                         (pyramid.min_depth(0, i, j), ratio)
                     })
@@ -156,7 +184,7 @@ impl ConeMap {
             })
             .collect();
         let (top, ratio) = rows.into_iter().flatten().unzip();
-        Self { width: w, height: h, edges, top, ratio, relaxed: false, ahead: None }
+        Self { width: w, height: h, edges, top, ratio, relaxed, ahead: None }
     }
 
     /// Conservative cones per direction quadrant: for each footprint, four ratios, each over the
@@ -178,7 +206,7 @@ impl ConeMap {
                     .map(|i| {
                         let mut ahead = [0.0f32; 4];
                         for (k, &q) in QUADRANTS.iter().enumerate() {
-                            let (ratio, at) = search.ratio_ahead(i, j, witness[k], Some(q));
+                            let (ratio, at) = search.ratio_ahead(i, j, witness[k], Some(q), false);
                             witness[k] = at.or(witness[k]);
                             ahead[k] = ratio;
                         }
@@ -651,19 +679,86 @@ impl<'a> Search<'a> {
 
     /// The cone ratio of footprint `(i, j)` and the surface point that decided it, starting
     /// from `witness` (a point that decided a neighbour's).
-    fn ratio(&self, i: u32, j: u32, witness: Option<(f64, f64)>) -> (f32, Option<(f64, f64)>) {
-        self.ratio_ahead(i, j, witness, None)
+    /// Whether a ray that starts on the top plane (depth 0) over footprint `C = [cx0, cx0 + 1] x
+    /// [cy0, cy0 + 1]` may leave the surface (pass from below it to above it) at a point of the
+    /// rectangle `r`, which lies inside one bilinear patch (a point when it has no extent).
+    ///
+    /// A ray from `p` on `C` reaches `X` at depth `d(X)` with the slope `d(X) / |X - p|`, and
+    /// leaves the surface there only if the surface falls along it faster than that:
+    /// `grad d(X) . u > d(X) / |X - p|`, `u` the direction from `p` to `X`. False (no exit
+    /// anywhere in `r`) when even the largest `grad . u` over `r` and every `p` is at most
+    /// `min d / max |X - p|` over `r`; true otherwise. With clamped edges, rectangles within
+    /// half a texel of the border are always true: the surface beyond repeats theirs.
+    fn may_exit(&self, cx0: f64, cy0: f64, r: &Region) -> bool {
+        if self.edges == EdgeMode::Clamp && (r.x0 < 0.5 || r.y0 < 0.5 || r.x1 > self.w - 0.5 || r.y1 > self.h - 0.5) {
+            return true;
+        }
+        let (k, l) = ((0.5 * (r.x0 + r.x1) - 0.5).floor(), (0.5 * (r.y0 + r.y1) - 0.5).floor());
+        let (ki, li) = (k as i64, l as i64);
+        let (d00, d10, d01, d11) =
+            (self.texel(ki, li), self.texel(ki + 1, li), self.texel(ki, li + 1), self.texel(ki + 1, li + 1));
+        // The slope along x is linear in y inside the patch, and the slope along y in x.
+        let gx = |y: f64| {
+            let ty = y - l - 0.5;
+            (d10 - d00) * (1.0 - ty) + (d11 - d01) * ty
+        };
+        let gy = |x: f64| {
+            let tx = x - k - 0.5;
+            (d01 - d00) * (1.0 - tx) + (d11 - d10) * tx
+        };
+        let (gx0, gx1) = (gx(r.y0).min(gx(r.y1)), gx(r.y0).max(gx(r.y1)));
+        let (gy0, gy1) = (gy(r.x0).min(gy(r.x1)), gy(r.x0).max(gy(r.x1)));
+        // The offsets X - p: a rectangle.
+        let (vx0, vx1, vy0, vy1) = (r.x0 - cx0 - 1.0, r.x1 - cx0, r.y0 - cy0 - 1.0, r.y1 - cy0);
+        let corners = [(vx0, vy0), (vx1, vy0), (vx0, vy1), (vx1, vy1)];
+        let far = corners.iter().map(|&(x, y)| x.hypot(y)).fold(0.0, f64::max);
+        let limit = r.min_depth / far;
+        if vx0 <= 0.0 && vx1 >= 0.0 && vy0 <= 0.0 && vy1 >= 0.0 {
+            // Every direction: the steepest slope counts.
+            return gx0.abs().max(gx1.abs()).hypot(gy0.abs().max(gy1.abs())) > limit;
+        }
+        // Over a cone of directions g . u is largest at an edge direction (a corner of the offset
+        // rectangle) unless g's own direction lies inside the cone, where it is |g|.
+        let inside = |gx: f64, gy: f64| {
+            // Does the ray {t (gx, gy), t > 0} meet the offset rectangle? (A slab test.)
+            let slab = |g: f64, lo: f64, hi: f64| -> (f64, f64) {
+                if g == 0.0 {
+                    if lo <= 0.0 && hi >= 0.0 { (f64::NEG_INFINITY, f64::INFINITY) } else { (1.0, -1.0) }
+                } else {
+                    let (a, b) = (lo / g, hi / g);
+                    (a.min(b), a.max(b))
+                }
+            };
+            let (a0, a1) = slab(gx, vx0, vx1);
+            let (b0, b1) = slab(gy, vy0, vy1);
+            a0.max(b0).max(0.0) <= a1.min(b1) && a1.min(b1) > 0.0
+        };
+        let mut most = f64::NEG_INFINITY;
+        for gx in [gx0, gx1] {
+            for gy in [gy0, gy1] {
+                let along = if inside(gx, gy) {
+                    gx.hypot(gy)
+                } else {
+                    corners.iter().map(|&(x, y)| (gx * x + gy * y) / x.hypot(y)).fold(f64::NEG_INFINITY, f64::max)
+                };
+                most = most.max(along);
+            }
+        }
+        most > limit
     }
 
-    /// [`Search::ratio`] over the surface a ray can reach from the footprint when its
-    /// direction's signs along x and y are `quadrant` (the footprint swept along that quadrant);
-    /// `None`: over all of it.
+    /// The cone ratio of footprint `(i, j)` and the surface point that decided it, starting from
+    /// `witness` (a point that decided a neighbour's), over the surface a ray can reach from the
+    /// footprint when its direction's signs along x and y are `quadrant` (the footprint swept
+    /// along that quadrant; `None`: all of it), and, if `relaxed`, only where a ray from the top
+    /// plane may leave the surface ([`Search::may_exit`]).
     fn ratio_ahead(
         &self,
         i: u32,
         j: u32,
         witness: Option<(f64, f64)>,
         quadrant: Option<(f64, f64)>,
+        relaxed: bool,
     ) -> (f32, Option<(f64, f64)>) {
         let m = f64::from(self.pyramid.min_depth(0, i, j));
         if m <= self.global_min {
@@ -686,6 +781,10 @@ impl<'a> Search<'a> {
         };
         let lower = |r: &Region| {
             if r.min_depth >= m - LEVEL || !ahead(r.x0, r.x1, r.y0, r.y1) {
+                return f64::INFINITY;
+            }
+            if relaxed && matches!(r.kind, Kind::Patch) && !self.may_exit(cx0, cy0, r) {
+                // Relaxed cones may hold surface where no ray from the top plane leaves it.
                 return f64::INFINITY;
             }
             let b = dist(r) / (m - r.min_depth);
@@ -930,6 +1029,74 @@ mod tests {
             // The steps are not trivially short: on average they cross a good part of a texel.
             println!("{w}x{h} {edges:?}: mean step {:.2} texels", advanced / 3000.0);
             assert!(advanced / 3000.0 > 0.2, "{edges:?}: mean step {}", advanced / 3000.0);
+        }
+    }
+
+    /// Relaxed cones against their definition, by brute force: a ray that starts on the top
+    /// plane over a footprint and advances by the relaxed safe step never leaves the surface
+    /// after entering it (sampled densely along the step), and the relaxed ratio is not below
+    /// the conservative one beyond the search's tolerance (how much wider depends on the
+    /// relief: trace_analytic.rs measures it on cobblestones). A planted error (cones twice as wide) is caught, so the check can
+    /// fail.
+    #[test]
+    fn relaxed_cones_let_a_ray_from_the_top_plane_cross_the_surface_at_most_once() {
+        use glam::Vec2;
+        for (w, h, edges) in [(14, 12, EdgeMode::Wrap), (11, 13, EdgeMode::Clamp)] {
+            let f = noisy(w, h, 3 * w + h);
+            let conservative = ConeMap::conservative(&f, edges);
+            let relaxed = ConeMap::relaxed_cones(&f, edges);
+            assert!(relaxed.relaxed() && !conservative.relaxed());
+            let size = Vec2::new(w as f32, h as f32);
+            let (mut sum_relaxed, mut sum_conservative) = (0.0, 0.0);
+            for j in 0..h {
+                for i in 0..w {
+                    // Both searches stop within (1 - SLACK) / (1 + FAR) of their exact answers,
+                    // and the exact relaxed cone is never the narrower.
+                    let floor = (1.0 - SLACK) / (1.0 + FAR);
+                    assert!(
+                        f64::from(relaxed.ratio(i, j)) >= floor * f64::from(conservative.ratio(i, j)),
+                        "{edges:?} ({i},{j})"
+                    );
+                    sum_relaxed += f64::from(relaxed.ratio(i, j));
+                    sum_conservative += f64::from(conservative.ratio(i, j));
+                }
+            }
+            println!("{w}x{h} {edges:?}: mean ratio relaxed {sum_relaxed:.1}, conservative {sum_conservative:.1}");
+            // Rays from the top plane, stepped; `widen` > 1 plants an error.
+            let exits = |widen: f32| {
+                let mut rng = 0x2545_f491_u32;
+                let mut next = move || {
+                    rng ^= rng << 13;
+                    rng ^= rng >> 17;
+                    rng ^= rng << 5;
+                    f64::from(rng) / f64::from(u32::MAX)
+                };
+                let mut bad = 0;
+                for _ in 0..3000 {
+                    let (i, j) = ((next() * f64::from(w)) as u32 % w, (next() * f64::from(h)) as u32 % h);
+                    let (top, ratio) = (relaxed.top(i, j), relaxed.ratio(i, j) * widen);
+                    let (x, y) = (f64::from(i) + next(), f64::from(j) + next());
+                    let speed = 60.0 * next() * next();
+                    let azimuth = std::f64::consts::TAU * next();
+                    let t_end = f64::from(safe_step(top, ratio, 0.0, speed as f32, 1.0)).min(1.0);
+                    // Below the surface at some sample, then above it again at a later one.
+                    let mut entered = false;
+                    for k in 0..=800 {
+                        let t = t_end * f64::from(k) / 800.0;
+                        let (px, py) = (x + t * speed * azimuth.cos(), y + t * speed * azimuth.sin());
+                        let surface = f64::from(f.sample_bilinear(Vec2::new(px as f32, py as f32) / size, edges));
+                        if t > surface + 1e-4 {
+                            entered = true;
+                        } else if entered && t < surface - 1e-4 {
+                            bad += 1;
+                            break;
+                        }
+                    }
+                }
+                bad
+            };
+            assert_eq!(exits(1.0), 0, "{edges:?}: rays left the surface inside relaxed cones");
+            assert!(exits(2.0) > 0, "{edges:?}: cones twice too wide should let some ray out");
         }
     }
 }
