@@ -447,12 +447,7 @@ fn bad_cone_maps_fail_clearly_and_leave_no_file() {
     ok(&["bake", "cone", "builtin:bricks:32x32", "-o", "small_cones.png"]);
     ok(&["generate", "bricks", "--size", "64x64", "-o", "height.png"]);
     std::fs::write(dir.path().join("junk.png"), b"not an image").unwrap();
-    for (cones, needles) in [
-        ("small_cones.png", &["small_cones.png", "32x32", "64x64", "bake cone"][..]),
-        ("height.png", &["height.png", "not a cone map", "16-bit grey + alpha"][..]),
-        ("junk.png", &["junk.png"][..]),
-        ("missing.png", &["missing.png"][..]),
-    ] {
+    let trace_with = |cones: &str, output: &str| {
         let args = [
             "trace",
             "--height",
@@ -464,31 +459,24 @@ fn bad_cone_maps_fail_clearly_and_leave_no_file() {
             "--rays",
             "rays.csv",
             "-o",
-            "hits.csv",
+            output,
         ];
-        let out = pomkit(&args, dir.path());
-        assert!(!out.status.success(), "{args:?}");
+        (pomkit(&args, dir.path()), format!("{args:?}"))
+    };
+    for (cones, needles) in [
+        ("small_cones.png", &["small_cones.png", "32x32", "64x64", "bake cone"][..]),
+        ("height.png", &["height.png", "not a cone map", "16-bit grey + alpha"][..]),
+        ("junk.png", &["junk.png"][..]),
+        ("missing.png", &["missing.png"][..]),
+    ] {
+        let (out, args) = trace_with(cones, "hits.csv");
+        assert!(!out.status.success(), "{args}");
         for n in needles {
-            assert!(stderr(&out).contains(n), "{args:?}: stderr lacks '{n}':\n{}", stderr(&out));
+            assert!(stderr(&out).contains(n), "{args}: stderr lacks '{n}':\n{}", stderr(&out));
         }
-        assert!(!dir.path().join("hits.csv").exists(), "{args:?} left a hits file");
+        assert!(!dir.path().join("hits.csv").exists(), "{args} left a hits file");
     }
     // The hits file may not overwrite the cone map.
-    let out = pomkit(
-        &[
-            "trace",
-            "--height",
-            "height.png",
-            "--technique",
-            "cone",
-            "--cone-map",
-            "small_cones.png",
-            "--rays",
-            "rays.csv",
-            "-o",
-            "small_cones.png",
-        ],
-        dir.path(),
-    );
+    let (out, _) = trace_with("small_cones.png", "small_cones.png");
     assert!(!out.status.success() && stderr(&out).contains("small_cones.png"), "{}", stderr(&out));
 }
