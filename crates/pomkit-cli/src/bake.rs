@@ -350,7 +350,13 @@ pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Re
     let layout = job.kind.layout();
     let (field, mut outs, id) = prepare(input, &job.read, &opts, output, layout)?;
     let (w, h) = (field.width(), field.height());
-    let pb = if bars { progress::bar(u64::from(h), u64::from(w), "baking") } else { indicatif::ProgressBar::hidden() };
+    // A cone costs many texels' worth of a normal map: its bar shows for smaller maps.
+    let weight = if matches!(job.kind, Kind::Cone { .. }) { crate::CONE_TEXEL_WEIGHT } else { 1 };
+    let pb = if bars {
+        progress::bar(u64::from(h), u64::from(w) * u64::from(weight), "baking")
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
     let tick = |rows: u32| pb.inc(u64::from(rows));
     match job.kind {
         Kind::Normal(encoding @ (NormalEncoding::Rgb8 | NormalEncoding::Rg8)) => {

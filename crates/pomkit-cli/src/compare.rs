@@ -87,7 +87,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     }
     let out_id = outs.output(&out);
     outs.check()?;
-    let surface = a.height.surface(&params)?;
+    let surface = a.height.surface(&params, techniques.contains(&pomkit_core::trace::Technique::Cone))?;
     let (w, h) = (surface.field().width(), surface.field().height());
     let pb = progress::items((angles.len() * a.rays) as u64, MIN_RAYS_FOR_BAR, "comparing", "rays");
     let rows = accuracy::compare(&surface, &techniques, &angles, &params, a.rays, a.seed, &|n| pb.inc(n as u64));

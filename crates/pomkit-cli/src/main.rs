@@ -91,6 +91,10 @@ fn view(args: &ViewArgs) -> Result<()> {
     Ok(())
 }
 
+/// Building a texel's cone costs about as much as baking 16 texels of a normal map: the weight
+/// of a cone build in the progress bars' "long enough for a bar" rule.
+pub(crate) const CONE_TEXEL_WEIGHT: u32 = 16;
+
 /// Where a height map comes from and how to read it, as `--height H` (`trace`, `compare`).
 #[derive(Args, Debug, Clone)]
 pub(crate) struct HeightOption {
@@ -160,14 +164,27 @@ impl HeightOption {
     }
 
     /// The height field prepared for tracing with `params`, with the cone map of `--cone-map`
-    /// when one is given.
-    pub(crate) fn surface(&self, params: &pomkit_core::trace::TraceParams) -> Result<pomkit_core::trace::Surface> {
+    /// when one is given, or else, when `cones` (the `cone` technique will run), the cones
+    /// built here under a progress bar.
+    pub(crate) fn surface(
+        &self,
+        params: &pomkit_core::trace::TraceParams,
+        cones: bool,
+    ) -> Result<pomkit_core::trace::Surface> {
         let field = self.load()?;
         let (w, h) = (field.width(), field.height());
         let mut surface = pomkit_core::trace::Surface::new(field, params.edges, params.depth_scale);
         if let Some(path) = &self.cone_map {
             let cones = pomkit_io::load_cone_map(path, w, h, params.edges)?;
             surface.set_cones(cones).with_context(|| format!("--cone-map {}", path.display()))?;
+        } else if cones {
+            let built = progress::rows(
+                h,
+                w.saturating_mul(CONE_TEXEL_WEIGHT),
+                &format!("building the cones of {w}x{h}"),
+                |tick| pomkit_core::cone::ConeMap::conservative_with_progress(surface.field(), params.edges, tick),
+            );
+            surface.set_cones(built).context("internal error: cones of another size")?;
         }
         Ok(surface)
     }

@@ -109,6 +109,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         None => pomkit_core::demo::demo_scene(),
     };
     let mut renderer = Renderer::open(a.backend)?;
+    let all_modes: Vec<Mode> = if modes.is_empty() { vec![mode] } else { modes.iter().map(|(_, m)| *m).collect() };
+    let _cones = build_cones(&scene, &all_modes);
     let base = RenderOptions {
         width: w,
         height: h,
@@ -160,6 +162,28 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     outs.commit()?;
     eprintln!("wrote {} ({} panels)", a.output.display(), panels.len());
     Ok(())
+}
+
+/// Builds, under a progress bar, the cones of every height map drawn with `cone` in one of
+/// `modes` (both renderers then find them in `pomkit_core::cone::cached`); returns them so that
+/// they outlive the renders.
+fn build_cones(scene: &Scene, modes: &[Mode]) -> Vec<std::sync::Arc<pomkit_core::cone::ConeMap>> {
+    scene
+        .materials
+        .iter()
+        .filter(|m| modes.iter().any(|mode| mode.technique(m.technique) == Technique::Cone))
+        .filter_map(|m| {
+            let field = m.height.as_ref()?;
+            let edges = m.trace.sanitized().edges;
+            let what = format!("building the cones of \"{}\" ({}x{})", m.name, field.width(), field.height());
+            Some(progress::rows(
+                field.height(),
+                field.width().saturating_mul(crate::CONE_TEXEL_WEIGHT),
+                &what,
+                |tick| pomkit_core::cone::cached_with_progress(field, edges, tick),
+            ))
+        })
+        .collect()
 }
 
 /// Samples per frame from which the GPU renderer shows a spinner (a software adapter such as

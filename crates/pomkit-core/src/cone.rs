@@ -361,6 +361,17 @@ impl ConeMap {
 /// forgotten.
 #[must_use]
 pub fn cached(field: &std::sync::Arc<HeightField>, edges: EdgeMode) -> std::sync::Arc<ConeMap> {
+    cached_with_progress(field, edges, &|_| {})
+}
+
+/// As [`cached`], calling `progress(rows)` as each row of footprints is built (not at all when
+/// the cones are there already).
+#[must_use]
+pub fn cached_with_progress(
+    field: &std::sync::Arc<HeightField>,
+    edges: EdgeMode,
+    progress: &(dyn Fn(u32) + Sync),
+) -> std::sync::Arc<ConeMap> {
     use std::sync::{Arc, Mutex, Weak};
     type Entry = (Weak<HeightField>, EdgeMode, Arc<ConeMap>);
     static CACHE: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
@@ -373,7 +384,7 @@ pub fn cached(field: &std::sync::Arc<HeightField>, edges: EdgeMode) -> std::sync
         return c;
     }
     // Built outside the lock: two threads may both build the same cones, never wait on each other.
-    let cones = Arc::new(ConeMap::conservative(field, edges));
+    let cones = Arc::new(ConeMap::conservative_with_progress(field, edges, progress));
     let mut cache = CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     if let Some(c) = find(&mut cache) {
         return c;
