@@ -22,6 +22,12 @@
 //! ratio is capped at [`ConeMap::cap`], one tile's width: wider cones are never needed to cross
 //! a tile in one step.
 //!
+//! Besides these conservative cones, [`ConeMap::relaxed_cones`] builds relaxed ones (Policarpo
+//! and Oliveira 2007: a ray from the top plane crosses the surface at most once inside the cone)
+//! and [`ConeMap::directional`] one ratio per quadrant of ray directions. The `cone` technique's
+//! walk is `first_hit` (crate-private); [`cached`] shares a field's cones between the frames and renderers
+//! that use them.
+//!
 //! # How the ratio is found
 //!
 //! The naive build tests every texel against every other, quadratic in the texel count. This
