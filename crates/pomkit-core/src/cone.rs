@@ -25,8 +25,8 @@
 //! Besides these conservative cones, [`ConeMap::relaxed_cones`] builds relaxed ones (Policarpo
 //! and Oliveira 2007: a ray from the top plane crosses the surface at most once inside the cone)
 //! and [`ConeMap::directional`] one ratio per quadrant of ray directions. The `cone` technique's
-//! walk is `first_hit` (crate-private); [`cached`] shares a field's cones between the frames and renderers
-//! that use them.
+//! walk is `first_hit` (crate-private); [`cached`] shares a field's cones between the frames
+//! and renderers that use them.
 //!
 //! # How the ratio is found
 //!
