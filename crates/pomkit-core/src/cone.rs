@@ -1007,16 +1007,21 @@ mod tests {
         }
     }
 
+    /// Numbers in `[0, 1]` from a xorshift generator seeded with `seed` (not 0).
+    fn uniform(seed: u32) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            f64::from(state) / f64::from(u32::MAX)
+        }
+    }
+
     #[test]
     fn a_ray_advanced_by_the_safe_step_never_passes_through_the_surface() {
         use glam::Vec2;
-        let mut rng = 0x9e37_79b9_u32;
-        let mut next = move || {
-            rng ^= rng << 13;
-            rng ^= rng >> 17;
-            rng ^= rng << 5;
-            f64::from(rng) / f64::from(u32::MAX)
-        };
+        let mut next = uniform(0x9e37_79b9);
         for (w, h, edges) in [(12, 10, EdgeMode::Wrap), (9, 13, EdgeMode::Clamp)] {
             let f = noisy(w, h, w + h);
             let cones = ConeMap::conservative(&f, edges);
@@ -1081,13 +1086,7 @@ mod tests {
             println!("{w}x{h} {edges:?}: mean ratio relaxed {sum_relaxed:.1}, conservative {sum_conservative:.1}");
             // Rays from the top plane, stepped; `widen` > 1 plants an error.
             let exits = |widen: f32| {
-                let mut rng = 0x2545_f491_u32;
-                let mut next = move || {
-                    rng ^= rng << 13;
-                    rng ^= rng >> 17;
-                    rng ^= rng << 5;
-                    f64::from(rng) / f64::from(u32::MAX)
-                };
+                let mut next = uniform(0x2545_f491);
                 let mut bad = 0;
                 for _ in 0..3000 {
                     let (i, j) = ((next() * f64::from(w)) as u32 % w, (next() * f64::from(h)) as u32 % h);
