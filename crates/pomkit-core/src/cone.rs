@@ -226,15 +226,17 @@ impl ConeMap {
         Self { width: w, height: h, edges, top, ratio, relaxed: false, ahead: Some(ahead) }
     }
 
-    /// The ratio for a ray moving along `(dx, dy)` from footprint `(x, y)`: the directional one
-    /// where the map has them, else the isotropic one.
+    /// The top and the ratio of footprint `(x, y)` for a ray moving along `(dx, dy)`, without
+    /// the bounds check (the walk's read): the directional ratio where the map has them, else
+    /// the isotropic one.
     #[inline]
-    pub(crate) fn ratio_along(&self, x: u32, y: u32, dx: f64, dy: f64) -> f32 {
+    pub(crate) fn cone_along(&self, x: u32, y: u32, dx: f64, dy: f64) -> (f32, f32) {
         let k = (y * self.width + x) as usize;
-        match &self.ahead {
+        let ratio = match &self.ahead {
             Some(a) => a[k][usize::from(dx < 0.0) + 2 * usize::from(dy < 0.0)],
             None => self.ratio[k],
-        }
+        };
+        (self.top[k], ratio)
     }
 
     /// Decodes the grey + alpha samples of [`ConeMap::to_gray_alpha16`] (a baked cone map,
@@ -279,13 +281,6 @@ impl ConeMap {
         } else {
             Err(ConeMapError::Size { got_w: self.width, got_h: self.height, want_w: width, want_h: height })
         }
-    }
-
-    /// Top and ratio of footprint `(x, y)` without the bounds check (the tracers' read).
-    #[inline]
-    pub(crate) fn texel(&self, x: u32, y: u32) -> (f32, f32) {
-        let k = (y * self.width + x) as usize;
-        (self.top[k], self.ratio[k])
     }
 
     /// About how many bytes building the cones of a `width` x `height` map and writing them
@@ -467,8 +462,8 @@ pub(crate) fn first_hit(
             break;
         }
         let Some((cell, _, t_exit)) = entered_cell(pyr, 0, o, d, t, t1, w, h, edges) else { break };
-        let (top, _) = cones.texel(cell.ix, cell.iy);
-        let (top, ratio) = (f64::from(top), f64::from(cones.ratio_along(cell.ix, cell.iy, d.x, d.y)));
+        let (top, ratio) = cones.cone_along(cell.ix, cell.iy, d.x, d.y);
+        let (top, ratio) = (f64::from(top), f64::from(ratio));
         fetches = fetches.saturating_add(1);
         let z = o.z + d.z * t;
         if z < top {
@@ -511,13 +506,19 @@ pub(crate) fn first_hit(
 
 /// The bilinear surface of `f`'s texels at `(x, y)` in texel units (centres at half-integers).
 fn surface_depth(f: &HeightField, edges: EdgeMode, x: f64, y: f64) -> f64 {
+    bilinear(|i, j| f64::from(f.depth_at(i, j, edges)), x, y)
+}
+
+/// The bilinear interpolation at `(x, y)` (texel units, centres at half-integers) of the texel
+/// depths `texel(i, j)` gives.
+#[inline]
+fn bilinear(texel: impl Fn(i64, i64) -> f64, x: f64, y: f64) -> f64 {
     let (sx, sy) = (x - 0.5, y - 0.5);
     let (fx, fy) = (sx.floor(), sy.floor());
     let (tx, ty) = (sx - fx, sy - fy);
     let (k, l) = (fx as i64, fy as i64);
-    let at = |i: i64, j: i64| f64::from(f.depth_at(i, j, edges));
-    let top = at(k, l) + (at(k + 1, l) - at(k, l)) * tx;
-    let bottom = at(k, l + 1) + (at(k + 1, l + 1) - at(k, l + 1)) * tx;
+    let top = texel(k, l) + (texel(k + 1, l) - texel(k, l)) * tx;
+    let bottom = texel(k, l + 1) + (texel(k + 1, l + 1) - texel(k, l + 1)) * tx;
     top + (bottom - top) * ty
 }
 
@@ -585,13 +586,7 @@ impl<'a> Search<'a> {
 
     /// The bilinear surface's depth at `(x, y)` in texel units (texel centres at half-integers).
     fn surface(&self, x: f64, y: f64) -> f64 {
-        let (sx, sy) = (x - 0.5, y - 0.5);
-        let (fx, fy) = (sx.floor(), sy.floor());
-        let (tx, ty) = (sx - fx, sy - fy);
-        let (k, l) = (fx as i64, fy as i64);
-        let top = self.texel(k, l) + (self.texel(k + 1, l) - self.texel(k, l)) * tx;
-        let bottom = self.texel(k, l + 1) + (self.texel(k + 1, l + 1) - self.texel(k, l + 1)) * tx;
-        top + (bottom - top) * ty
+        bilinear(|i, j| self.texel(i, j), x, y)
     }
 
     /// The slope of patch `(k, l)` (corner texels `(k, l)` to `(k + 1, l + 1)`, covering

@@ -418,12 +418,6 @@ impl Surface {
         self.cones.get_or_init(|| std::sync::Arc::new(ConeMap::conservative(self.field(), self.edges)))
     }
 
-    /// Whether the cone map is there already (given, or built by an earlier `cone` trace).
-    #[must_use]
-    pub fn has_cones(&self) -> bool {
-        self.cones.get().is_some()
-    }
-
     /// Uses `cones` (a baked cone map, [`ConeMap::from_gray_alpha16`], or the shared map of
     /// [`crate::cone::cached`]) instead of building them. They must be this field's cones for
     /// this edge mode: only the size can be checked.
