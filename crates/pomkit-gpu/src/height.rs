@@ -304,11 +304,22 @@ pub struct HeightPassOptions {
     /// differences, as `Surface::new`). Central (the default) is sharpest; Sobel costs 8 texel
     /// reads instead of 4 and blurs detail finer than 2 texels, which hides noise in the input.
     pub filter: NormalFilter,
+    /// Also build the conservative cone ratios of the new depths on the GPU (stage 4 of
+    /// [`HeightPasses::encode`]) and put them into the pyramid's level 0, for the library's
+    /// `cone` technique. Off by default: cones cost far more than the other passes (a search
+    /// per texel, `pomkit_core::cone`), and only `cone` reads them. With it off, the cones last
+    /// written ([`HeightMaps::write_cones`] or an earlier build) stay.
+    pub build_cones: bool,
 }
 
 impl Default for HeightPassOptions {
     fn default() -> Self {
-        Self { edges: EdgeMode::Wrap, depth_scale: DEFAULT_DEPTH_SCALE, filter: NormalFilter::Central }
+        Self {
+            edges: EdgeMode::Wrap,
+            depth_scale: DEFAULT_DEPTH_SCALE,
+            filter: NormalFilter::Central,
+            build_cones: false,
+        }
     }
 }
 
@@ -322,6 +333,9 @@ enum Slot {
     /// `var<uniform> Params`.
     Params,
 }
+
+/// The storage slot of the `cones` texture.
+const R32: Slot = Slot::Storage(wgpu::TextureFormat::R32Float);
 
 /// One compute entry point of `height.wgsl` with its bind group layout.
 #[derive(Debug)]
@@ -394,6 +408,7 @@ pub struct HeightPasses {
     downsample: Stage,
     pyramid_base: Stage,
     pyramid_reduce: Stage,
+    cones: Stage,
 }
 
 impl HeightPasses {
@@ -414,6 +429,7 @@ impl HeightPasses {
                 &[Slot::Texture, r32, Slot::Params, Slot::Texture],
             ),
             pyramid_reduce: Stage::new(device, &module, "pyramid_reduce_main", &[Slot::Texture, r32, Slot::Params]),
+            cones: Stage::new(device, &module, "cone_main", &[Slot::Texture, Slot::Texture, R32, Slot::Params]),
         }
     }
 
@@ -425,7 +441,10 @@ impl HeightPasses {
     ///    `heights` mip 0's G (fields under 2 texels on a side: normal +Z, parallax value d);
     /// 2. every coarser mip of `heights` (R and G), the exact box filter of the one above;
     /// 3. pyramid level 0 (least depth of the bilinear surface over each texel's footprint),
-    ///    then each coarser level (least of its up to four children).
+    ///    then each coarser level (least of its up to four children);
+    /// 4. with `opts.build_cones`, the conservative cone ratio of every footprint (a branch and
+    ///    bound over the pyramid, as `pomkit_core::cone::ConeMap::conservative`), then level 0
+    ///    again to take them in.
     ///
     /// Cost: about 17 texel reads and 5 writes per texel of the field (8 more reads with Sobel
     /// normals), in `1 + height_levels + pyramid_levels` dispatches; a small uniform buffer and
@@ -454,7 +473,7 @@ impl HeightPasses {
         let mut push = |src: (u32, u32), dst: (u32, u32)| -> u64 {
             let offset = records.len() as u64;
             let mut p = Std140::new();
-            p.u(src.0).u(src.1).u(dst.0).u(dst.1).u(edges).u(filter).f(scale).u(0);
+            p.u(src.0).u(src.1).u(dst.0).u(dst.1).u(edges).u(filter).f(scale).u(maps.pyramid_levels);
             records.extend(p.bytes());
             records.resize((offset + stride) as usize, 0);
             offset
@@ -520,6 +539,21 @@ impl HeightPasses {
                     size,
                 );
             }
+        }
+
+        // 4. Cones from the finished pyramid, then level 0 again to copy them into its green.
+        if opts.build_cones {
+            let base = &maps.pyramid_level_views[0];
+            dispatch(
+                &self.cones,
+                &[view(mip0), view(&maps.pyramid_view), view(&maps.cones_view), record(normals_params)],
+                size,
+            );
+            dispatch(
+                &self.pyramid_base,
+                &[view(mip0), view(base), record(pyramid_params[0]), view(&maps.cones_view)],
+                size,
+            );
         }
     }
 }

@@ -30,7 +30,8 @@ struct Params {
     normal_filter: u32,
     /// Lengyel's s: the full depth range spans this many texel widths (depth_scale * width).
     scale: f32,
-    _pad: u32,
+    /// Levels of the pyramid (cone_main only).
+    levels: u32,
 }
 
 const EDGES_WRAP: u32 = 0u;
@@ -314,4 +315,335 @@ fn pyramid_reduce_main(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     textureStore(p_dst, vec2<i32>(id.xy), vec4<f32>(m, 0.0, 0.0, 0.0));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stage 4 (optional): conservative cone ratios, one footprint per invocation.
+//
+// Source: cone.rs `ConeMap::conservative`, the same branch and bound over the pyramid built by
+// stage 3, in f32 (cone.rs explains the definition and why each bound holds). Per footprint
+// C = [i, i + 1] x [j, j + 1] with top m (pyramid level 0), the ratio is the largest c with
+// dist(q, C) >= c (m - depth(q)) for every point q of the bilinear surface of heights mip 0:
+//
+// - a region (a pyramid cell, or a rectangle inside one bilinear patch) whose least depth is
+//   min_d bounds the ratio from below by dist(region, C) / (m - min_d); beside C also by the
+//   slope bound `cone_near_bound` (cone.rs `Search::near_bound`);
+// - corners of patch rectangles are surface points: each bounds it from above;
+// - regions whose lower bound is no better than the answer so far are dropped, others split;
+//   regions small for their distance, or under CONE_MIN_REGION texels, keep their lower bound.
+//
+// Differences from the CPU build, none of which can make a cone too wide: no witness carried
+// from the left neighbour (each invocation starts afresh: slower, same answer), and a region
+// that finds the stack full keeps its lower bound instead of being split. f32 rounding of the
+// bounds is some 1e-7 of the ratio; the library's walk lowers every top by
+// POMKIT_CONE_TOP_MARGIN, thousands of times more than that moves a cone.
+//
+// The result goes to the `cones` texture; `pyramid_base_main`, dispatched again after this
+// stage, copies it into the pyramid's level 0 (green), where the `cone` technique reads it.
+// ---------------------------------------------------------------------------------------------
+
+@group(0) @binding(0) var c_heights: texture_2d<f32>;
+@group(0) @binding(1) var c_pyramid: texture_2d<f32>;
+@group(0) @binding(2) var c_cones: texture_storage_2d<r32float, write>;
+@group(0) @binding(3) var<uniform> c_params: Params;
+
+/// cone.rs SLACK, FAR, MIN_REGION and LEVEL.
+const CONE_SLACK: f32 = 0.0625;
+const CONE_FAR: f32 = 0.25;
+const CONE_MIN_REGION: f32 = 0.125;
+const CONE_LEVEL: f32 = 1e-6;
+const CONE_INF: f32 = 3.0e38;
+/// Regions waiting to be searched. A depth-first search over a pyramid of at most 16 levels
+/// (65536 texels a side), 3 more splits inside a patch and 9 wrapped tiles holds at most
+/// 9 + 3 x 20 of them.
+const CONE_STACK: u32 = 72u;
+
+/// A rectangle of the plane in texel units with the least depth of the surface over it.
+struct ConeRegion {
+    /// x0, x1, y0, y1 (texel units; the tile's offset applied).
+    rect: vec4<f32>,
+    min_depth: f32,
+    /// Its lower bound on the ratio.
+    lb: f32,
+    /// Pyramid level of a cell, or -1 for a rectangle inside one bilinear patch.
+    level: i32,
+    /// The cell's coordinates at its level.
+    cell: vec2<i32>,
+    /// The tile (wrap: -1 to 1 along each axis) the cell lies in.
+    tile: vec2<i32>,
+}
+
+var<private> cone_stack: array<ConeRegion, CONE_STACK>;
+
+/// The depth of texel (x, y), any integers (wrapped or clamped).
+fn c_texel(x: i32, y: i32) -> f32 {
+    let size = vec2<i32>(c_params.src_size);
+    let q = vec2<i32>(resolve(x, size.x, c_params.edges), resolve(y, size.y, c_params.edges));
+    return textureLoad(c_heights, q, 0).r;
+}
+
+/// The four texels of patch (k, l): (k, l), (k + 1, l), (k, l + 1), (k + 1, l + 1).
+fn c_patch(k: i32, l: i32) -> vec4<f32> {
+    return vec4<f32>(c_texel(k, l), c_texel(k + 1, l), c_texel(k, l + 1), c_texel(k + 1, l + 1));
+}
+
+/// The bilinear surface of patch `d` (corner (k, l)) at (x, y).
+fn c_patch_depth(d: vec4<f32>, k: f32, l: f32, x: f32, y: f32) -> f32 {
+    let tx = x - k - 0.5;
+    let ty = y - l - 0.5;
+    let top = d.x + (d.y - d.x) * tx;
+    return top + (d.z + (d.w - d.z) * tx - top) * ty;
+}
+
+/// The surface's depth at (x, y).
+fn c_surface(x: f32, y: f32) -> f32 {
+    let k = floor(x - 0.5);
+    let l = floor(y - 0.5);
+    return c_patch_depth(c_patch(i32(k), i32(l)), k, l, x, y);
+}
+
+/// The slope (along x, along y) of patch (k, l) at (x, y).
+fn c_patch_slope(k: i32, l: i32, x: f32, y: f32) -> vec2<f32> {
+    let d = c_patch(k, l);
+    let tx = x - (f32(k) + 0.5);
+    let ty = y - (f32(l) + 0.5);
+    return vec2<f32>((d.y - d.x) * (1.0 - ty) + (d.w - d.z) * ty, (d.z - d.x) * (1.0 - tx) + (d.w - d.y) * tx);
+}
+
+/// Distance from the rectangle `r` (x0, x1, y0, y1) to the footprint with corner `c`.
+fn c_dist(r: vec4<f32>, c: vec2<f32>) -> f32 {
+    let dx = max(max(c.x - r.y, r.x - (c.x + 1.0)), 0.0);
+    let dy = max(max(c.y - r.w, r.z - (c.y + 1.0)), 0.0);
+    return sqrt(dx * dx + dy * dy);
+}
+
+/// Pyramid cell (x, y) of `level` in tile `tile`.
+fn c_node(level: i32, cell: vec2<i32>, tile: vec2<i32>) -> ConeRegion {
+    let size = vec2<i32>(c_params.src_size);
+    let s = 1 << u32(level);
+    let lo = min(cell * s, size);
+    let hi = min((cell + 1) * s, size);
+    let offset = vec2<f32>(tile * size);
+    let rect = vec4<f32>(f32(lo.x) + offset.x, f32(hi.x) + offset.x, f32(lo.y) + offset.y, f32(hi.y) + offset.y);
+    let min_depth = textureLoad(c_pyramid, cell, level).r;
+    return ConeRegion(rect, min_depth, 0.0, level, cell, tile);
+}
+
+/// A rectangle inside one patch: its least depth is at a corner.
+fn c_patch_rect(r: vec4<f32>) -> ConeRegion {
+    let k = floor(0.5 * (r.x + r.y) - 0.5);
+    let l = floor(0.5 * (r.z + r.w) - 0.5);
+    let d = c_patch(i32(k), i32(l));
+    let m = min(
+        min(c_patch_depth(d, k, l, r.x, r.z), c_patch_depth(d, k, l, r.y, r.z)),
+        min(c_patch_depth(d, k, l, r.x, r.w), c_patch_depth(d, k, l, r.y, r.w)),
+    );
+    return ConeRegion(r, m, 0.0, -1, vec2<i32>(0), vec2<i32>(0));
+}
+
+/// The largest slope across an edge, sign `sign`, of patch column or row `fixed`, at `x` or
+/// `y` = `at` across, over the stretch [a0, a1] along the edge (its ends and the patch boundary
+/// between them): cone.rs `near_bound`'s `along`.
+fn c_edge_rate(along_x: bool, fixed: i32, sign: f32, at: f32, a0: f32, a1: f32) -> f32 {
+    let mid = floor(a0) + 0.5;
+    var points = array<f32, 3>(a0, a1, select(a0, mid, mid > a0 && mid < a1));
+    var rate = 0.0;
+    for (var n = 0; n < 3; n++) {
+        let a = points[n];
+        let pk = i32(floor(a - 0.5));
+        if along_x {
+            // An edge running along x (above or below the footprint): slope along y.
+            rate = max(rate, sign * c_patch_slope(pk, fixed, a, at).y);
+        } else {
+            rate = max(rate, sign * c_patch_slope(fixed, pk, at, a).x);
+        }
+    }
+    return rate;
+}
+
+/// cone.rs `Search::near_bound`: a lower bound on the ratio from how fast the surface can fall
+/// below the footprint's edge, for regions half a texel or less beside the footprint (corner
+/// `c`, integer texel `ij`, top `m`); 0 elsewhere.
+fn c_near_bound(ij: vec2<i32>, c: vec2<f32>, m: f32, r: vec4<f32>) -> f32 {
+    let c1 = c + 1.0;
+    let right = r.x >= c1.x && r.y <= c1.x + 0.5;
+    let left = r.y <= c.x && r.x >= c.x - 0.5;
+    let below = r.z >= c1.y && r.w <= c1.y + 0.5;
+    let above = r.w <= c.y && r.z >= c.y - 0.5;
+    let across_x = r.x >= c.x && r.y <= c1.x;
+    let across_y = r.z >= c.y && r.w <= c1.y;
+    var rate = 0.0;
+    if (right || left) && across_y {
+        let k = select(ij.x - 1, ij.x, right);
+        let x = select(c.x - 0.25, c1.x + 0.25, right);
+        rate = c_edge_rate(false, k, select(1.0, -1.0, right), x, r.z, r.w);
+    } else if (below || above) && across_x {
+        let l = select(ij.y - 1, ij.y, below);
+        let y = select(c.y - 0.25, c1.y + 0.25, below);
+        rate = c_edge_rate(true, l, select(1.0, -1.0, below), y, r.x, r.y);
+    } else if (right || left) && (below || above) {
+        // Off a corner b: m - depth(q) <= -e + a |v| + t |v|^2 with v = q - b (cone.rs).
+        let k = select(ij.x - 1, ij.x, right);
+        let bx = select(c.x, c1.x, right);
+        let sx = select(-1.0, 1.0, right);
+        let l = select(ij.y - 1, ij.y, below);
+        let by = select(c.y, c1.y, below);
+        let sy = select(-1.0, 1.0, below);
+        let g = c_patch_slope(k, l, bx, by);
+        let d = c_patch(k, l);
+        let twist = d.x - d.y - d.z + d.w;
+        let e = max(c_surface(bx, by) - m, 0.0);
+        let a = length(vec2<f32>(max(-g.x * sx, 0.0), max(-g.y * sy, 0.0)));
+        let t = max(-twist * sx * sy, 0.0) / 2.0;
+        let far = length(vec2<f32>(max(abs(r.x - bx), abs(r.y - bx)), max(abs(r.z - by), abs(r.w - by))));
+        let fall = -e + a * far + t * far * far;
+        return select(CONE_INF, far / fall, fall > 0.0);
+    } else {
+        return 0.0;
+    }
+    return select(CONE_INF, 1.0 / rate, rate > 0.0);
+}
+
+/// The lower bound of region `r` for the footprint with corner `c`, top `m`.
+fn c_lower(ij: vec2<i32>, c: vec2<f32>, m: f32, r: ConeRegion) -> f32 {
+    if r.min_depth >= m - CONE_LEVEL {
+        return CONE_INF;
+    }
+    let b = c_dist(r.rect, c) / (m - r.min_depth);
+    return max(b, c_near_bound(ij, c, m, r.rect));
+}
+
+/// The ratio the surface point (x, y) allows the footprint (corner `c`, top `m`).
+fn c_point(c: vec2<f32>, m: f32, x: f32, y: f32) -> f32 {
+    let d = c_surface(x, y);
+    if d >= m - CONE_LEVEL {
+        return CONE_INF;
+    }
+    return c_dist(vec4<f32>(x, x, y, y), c) / (m - d);
+}
+
+/// The cone ratio of footprint `ij`.
+fn cone_ratio(ij: vec2<i32>) -> f32 {
+    let size = vec2<i32>(c_params.src_size);
+    let top = i32(c_params.levels) - 1;
+    let cap = f32(min(size.x, size.y));
+    let m = textureLoad(c_pyramid, ij, 0).r;
+    if m <= textureLoad(c_pyramid, vec2<i32>(0), top).r {
+        // Nothing is shallower than this footprint's top.
+        return cap;
+    }
+    let c = vec2<f32>(ij);
+    var best = cap / (1.0 - CONE_SLACK);
+    var floor_ = CONE_INF;
+    var n = 0u;
+    let tiles = select(0, 1, c_params.edges == EDGES_WRAP);
+    for (var ty = -tiles; ty <= tiles; ty++) {
+        for (var tx = -tiles; tx <= tiles; tx++) {
+            var r = c_node(top, vec2<i32>(0), vec2<i32>(tx, ty));
+            r.lb = c_lower(ij, c, m, r);
+            cone_stack[n] = r;
+            n++;
+        }
+    }
+    var kids: array<ConeRegion, 4>;
+    while n > 0u {
+        n--;
+        let r = cone_stack[n];
+        if r.lb >= min(best * (1.0 - CONE_SLACK), floor_) {
+            continue;
+        }
+        // Small for its distance: its bound is within 1 + CONE_FAR of its points' ratios.
+        let diagonal = length(vec2<f32>(r.rect.y - r.rect.x, r.rect.w - r.rect.z));
+        if diagonal <= CONE_FAR * c_dist(r.rect, c) {
+            floor_ = min(floor_, r.lb);
+            continue;
+        }
+        var count = 0;
+        if r.level == 0 {
+            // The footprint's quarters, each inside one patch.
+            let xm = r.rect.x + 0.5;
+            let ym = r.rect.z + 0.5;
+            kids[0] = c_patch_rect(vec4<f32>(r.rect.x, xm, r.rect.z, ym));
+            kids[1] = c_patch_rect(vec4<f32>(xm, r.rect.y, r.rect.z, ym));
+            kids[2] = c_patch_rect(vec4<f32>(r.rect.x, xm, ym, r.rect.w));
+            kids[3] = c_patch_rect(vec4<f32>(xm, r.rect.y, ym, r.rect.w));
+            count = 4;
+        } else if r.level > 0 {
+            let child_size = (size + (1 << u32(r.level - 1)) - 1) >> vec2<u32>(u32(r.level - 1));
+            for (var k = 0; k < 4; k++) {
+                let cell = 2 * r.cell + vec2<i32>(k & 1, k >> 1u);
+                if all(cell < child_size) {
+                    kids[count] = c_node(r.level - 1, cell, r.tile);
+                    count++;
+                }
+            }
+        } else {
+            // Its corners are surface points.
+            best = min(best, c_point(c, m, r.rect.x, r.rect.z));
+            best = min(best, c_point(c, m, r.rect.y, r.rect.z));
+            best = min(best, c_point(c, m, r.rect.x, r.rect.w));
+            best = min(best, c_point(c, m, r.rect.y, r.rect.w));
+            // Level with the footprint along one axis, the ratio is least at a corner (cone.rs).
+            let band = (r.rect.z >= c.y && r.rect.w <= c.y + 1.0) || (r.rect.x >= c.x && r.rect.y <= c.x + 1.0);
+            if band {
+                continue;
+            }
+            let wide = r.rect.y - r.rect.x > CONE_MIN_REGION;
+            let tall = r.rect.w - r.rect.z > CONE_MIN_REGION;
+            if !wide && !tall {
+                floor_ = min(floor_, r.lb);
+                continue;
+            }
+            let xm = select(r.rect.y, 0.5 * (r.rect.x + r.rect.y), wide);
+            let ym = select(r.rect.w, 0.5 * (r.rect.z + r.rect.w), tall);
+            kids[0] = c_patch_rect(vec4<f32>(r.rect.x, xm, r.rect.z, ym));
+            count = 1;
+            if wide {
+                kids[count] = c_patch_rect(vec4<f32>(xm, r.rect.y, r.rect.z, ym));
+                count++;
+            }
+            if tall {
+                kids[count] = c_patch_rect(vec4<f32>(r.rect.x, xm, ym, r.rect.w));
+                count++;
+            }
+            if wide && tall {
+                kids[count] = c_patch_rect(vec4<f32>(xm, r.rect.y, ym, r.rect.w));
+                count++;
+            }
+        }
+        for (var k = 0; k < count; k++) {
+            kids[k].lb = c_lower(ij, c, m, kids[k]);
+        }
+        // Largest bound first, so the most promising child is on top of the stack.
+        for (var a = 1; a < count; a++) {
+            var b = a;
+            while b > 0 && kids[b - 1].lb < kids[b].lb {
+                let t = kids[b - 1];
+                kids[b - 1] = kids[b];
+                kids[b] = t;
+                b--;
+            }
+        }
+        let threshold = min(best * (1.0 - CONE_SLACK), floor_);
+        for (var k = 0; k < count; k++) {
+            if kids[k].lb < threshold {
+                if n < CONE_STACK {
+                    cone_stack[n] = kids[k];
+                    n++;
+                } else {
+                    // No room to split it: it keeps its lower bound (safe, if narrower).
+                    floor_ = min(floor_, kids[k].lb);
+                }
+            }
+        }
+    }
+    return clamp(min(best * (1.0 - CONE_SLACK), floor_), 0.0, cap);
+}
+
+@compute @workgroup_size(8, 8)
+fn cone_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if any(id.xy >= c_params.dst_size) {
+        return;
+    }
+    textureStore(c_cones, vec2<i32>(id.xy), vec4<f32>(cone_ratio(vec2<i32>(id.xy)), 0.0, 0.0, 0.0));
 }

@@ -113,6 +113,11 @@ pub struct HeightResourceOptions {
     /// Slope filter of the normal map (default central differences), as
     /// [`HeightPassOptions::filter`].
     pub normal_filter: NormalFilter,
+    /// Build the conservative cones of the heights on the GPU at every rebuild
+    /// ([`HeightPassOptions::build_cones`]), for shaders that trace with the library's `cone`
+    /// technique. Default false: the cones cost a search per texel, far more than the other
+    /// passes; without them (or [`HeightResource::write_cones`]) `cone` walks as `exact` does.
+    pub cones: bool,
 }
 
 impl Default for HeightResourceOptions {
@@ -123,6 +128,7 @@ impl Default for HeightResourceOptions {
             edges: EdgeMode::Wrap,
             depth_scale: 0.1,
             normal_filter: NormalFilter::Central,
+            cones: false,
         }
     }
 }
@@ -131,7 +137,12 @@ impl HeightResourceOptions {
     /// The options of [`HeightPasses::encode`] these imply.
     #[must_use]
     pub fn pass_options(&self) -> HeightPassOptions {
-        HeightPassOptions { edges: self.edges, depth_scale: self.depth_scale, filter: self.normal_filter }
+        HeightPassOptions {
+            edges: self.edges,
+            depth_scale: self.depth_scale,
+            filter: self.normal_filter,
+            build_cones: self.cones,
+        }
     }
 }
 
@@ -548,7 +559,8 @@ impl HeightResource {
     /// this resource holds, with its edge mode (`pomkit_core::cone::ConeMap::conservative`, or
     /// `cached`); `None` removes them. Run [`HeightResource::encode_rebuild`] afterwards: the
     /// rebuild copies them into the pyramid. Without cones `cone` walks as `exact` does (the
-    /// same hits); remove them when the heights change.
+    /// same hits); remove them when the heights change, or let the GPU build them at every
+    /// rebuild instead ([`HeightResourceOptions::cones`]).
     ///
     /// # Errors
     /// [`crate::GpuError::Unsupported`] if the cones are not the resource's size.

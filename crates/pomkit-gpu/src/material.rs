@@ -490,6 +490,9 @@ pub struct GpuMaterial {
     /// The height field's GPU textures (mips, normals, parallax map, pyramid), if it has one.
     pub height: Option<HeightMaps>,
     height_options: HeightPassOptions,
+    /// Whether the next [`GpuMaterial::encode_rebuild`] builds the cones on the GPU: set when
+    /// the heights change under the `cone` technique, or `cone` is chosen without cones.
+    cones_stale: std::sync::atomic::AtomicBool,
     /// The material's uniform block: [`PomkitParams`] in its first 64 bytes.
     uniforms: wgpu::Buffer,
     params: PomkitParams,
@@ -513,7 +516,8 @@ impl GpuMaterial {
         normal_filter: NormalFilter,
     ) -> Result<Self, GpuError> {
         let p = material.trace.sanitized();
-        let height_options = HeightPassOptions { edges: p.edges, depth_scale: p.depth_scale, filter: normal_filter };
+        let height_options =
+            HeightPassOptions { edges: p.edges, depth_scale: p.depth_scale, filter: normal_filter, build_cones: false };
         let height = match &material.height {
             Some(field) => {
                 let maps = HeightMaps::new(ctx, field.width(), field.height(), &material.name)?;
@@ -600,6 +604,7 @@ impl GpuMaterial {
             silhouette,
             height,
             height_options,
+            cones_stale: false.into(),
             uniforms,
             params,
             bind_group,
@@ -711,6 +716,7 @@ impl GpuMaterial {
             silhouette: material.silhouette && technique.displaces(),
             height: None,
             height_options: height.options().pass_options(),
+            cones_stale: false.into(),
             uniforms,
             params,
             bind_group,
@@ -727,7 +733,9 @@ impl GpuMaterial {
     /// threshold, ...) by writing the uniform buffer: no texture, bind group or pipeline is
     /// rebuilt. Draw with the pipeline of the new [`GpuMaterial::technique`]. A new depth scale
     /// also changes the normals baked from the height map: call
-    /// [`GpuMaterial::encode_rebuild`] to bring them along.
+    /// [`GpuMaterial::encode_rebuild`] to bring them along. Switching to `cone` from another
+    /// technique has the next rebuild build the cones on the GPU (until then `cone` walks as
+    /// `exact` does: the same hits, without the cones' speed).
     ///
     /// # Errors
     /// [`ParamError::EdgesChanged`] when the edge mode differs: the sampler's address mode
@@ -738,6 +746,10 @@ impl GpuMaterial {
         }
         ctx.queue.write_buffer(&self.uniforms, 0, &params.to_bytes());
         self.params = *params;
+        if params.technique == Technique::Cone && self.technique != Technique::Cone {
+            // Built on the GPU by the next rebuild (until then `cone` walks as `exact`).
+            self.cones_stale.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
         self.technique = params.technique;
         let depth_scale = params.trace.sanitized().depth_scale;
         self.height_options.depth_scale = depth_scale;
@@ -754,12 +766,15 @@ impl GpuMaterial {
         timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
     ) {
         if let Some(maps) = &self.height {
-            pipelines.passes.encode(device, encoder, maps, &self.height_options, timestamps);
+            let build_cones = self.cones_stale.swap(false, std::sync::atomic::Ordering::Relaxed);
+            let opts = HeightPassOptions { build_cones, ..self.height_options };
+            pipelines.passes.encode(device, encoder, maps, &opts, timestamps);
         }
     }
 
     /// Uploads a new height field of the same size (a dynamic height field: call each frame,
-    /// then [`GpuMaterial::encode_rebuild`]).
+    /// then [`GpuMaterial::encode_rebuild`]). Under the `cone` technique the old cones are
+    /// removed; [`GpuMaterial::rebuild_cones`] builds new ones.
     ///
     /// # Errors
     /// [`GpuError::Unsupported`] if the material has no height map or the size differs.
@@ -778,11 +793,21 @@ impl GpuMaterial {
             )));
         }
         maps.upload_depths(ctx, field.depths())?;
-        // The cones described the old heights: `cone` walks as `exact` does from now on.
+        // The cones described the old heights: `cone` walks as `exact` does from now on, unless
+        // the caller asks for new ones (`rebuild_cones`).
         if self.technique == Technique::Cone {
             maps.write_cones(&ctx.queue, None)?;
         }
         Ok(())
+    }
+
+    /// Has the next [`GpuMaterial::encode_rebuild`] build the cones of the current heights on
+    /// the GPU ([`HeightPassOptions::build_cones`]), for the `cone` technique after
+    /// [`GpuMaterial::update_height`] (which removes the old heights' cones: `cone` then walks
+    /// as `exact` does, with the same hits). A search per texel: far dearer than the other
+    /// passes (docs/BENCHMARKS.md), so for heights that change every frame leave them out.
+    pub fn rebuild_cones(&self) {
+        self.cones_stale.store(true, std::sync::atomic::Ordering::Relaxed);
     }
 }
 

@@ -275,7 +275,7 @@ fn passes_match_the_cpu_core() {
         for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
             for filter in [NormalFilter::Central, NormalFilter::Sobel] {
                 for depth_scale in [0.1, 0.04] {
-                    let opts = HeightPassOptions { edges, depth_scale, filter };
+                    let opts = HeightPassOptions { edges, depth_scale, filter, build_cones: false };
                     check_field(&ctx, &passes, &maps, field, &opts, &mut worst);
                 }
             }
@@ -292,11 +292,17 @@ fn a_new_field_replaces_the_old_one() {
     let a = noise(w, h, 11);
     let b = waves(w, h);
     let maps = HeightMaps::new(&ctx, w, h, "dynamic").unwrap();
-    let opts = HeightPassOptions { edges: EdgeMode::Wrap, depth_scale: 0.1, filter: NormalFilter::Sobel };
+    let opts =
+        HeightPassOptions { edges: EdgeMode::Wrap, depth_scale: 0.1, filter: NormalFilter::Sobel, build_cones: false };
     let mut worst = Worst::default();
     check_field(&ctx, &passes, &maps, &a, &opts, &mut worst);
     // Frame 2: new depths and different options; nothing of frame 1 may survive.
-    let opts_b = HeightPassOptions { edges: EdgeMode::Clamp, depth_scale: 0.05, filter: NormalFilter::Central };
+    let opts_b = HeightPassOptions {
+        edges: EdgeMode::Clamp,
+        depth_scale: 0.05,
+        filter: NormalFilter::Central,
+        build_cones: false,
+    };
     check_field(&ctx, &passes, &maps, &b, &opts_b, &mut worst);
     // Back to A, rebuilt twice in one submission (with B's options, then A's): the second
     // rebuild overwrites everything the first wrote.
@@ -397,4 +403,112 @@ fn shader_validates() {
     naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
         .validate(&module)
         .unwrap_or_else(|e| panic!("{}", e.emit_to_string(source)));
+}
+
+/// The bilinear surface of `f` at `(x, y)` in texel units (centres at half-integers).
+fn surface(f: &HeightField, edges: EdgeMode, x: f64, y: f64) -> f64 {
+    let (sx, sy) = (x - 0.5, y - 0.5);
+    let (k, l) = (sx.floor() as i64, sy.floor() as i64);
+    let (tx, ty) = (sx - sx.floor(), sy - sy.floor());
+    let d = |i: i64, j: i64| f64::from(f.depth_at(i, j, edges));
+    let top = d(k, l) + (d(k + 1, l) - d(k, l)) * tx;
+    let bottom = d(k, l + 1) + (d(k + 1, l + 1) - d(k, l + 1)) * tx;
+    top + (bottom - top) * ty
+}
+
+/// The brute-force cone ratio of footprint `(i, j)` with top `m`: the least
+/// `dist(q, C) / (m - depth(q))` over surface points `q` every `1 / n` texel across the area a
+/// cone can reach (3 x 3 tiles with wrap edges, the map with clamp: cone.rs explains why).
+/// Sampling can only miss the minimum, so this is at least the true ratio.
+fn brute_ratio(f: &HeightField, edges: EdgeMode, m: f64, i: u32, j: u32, n: u32) -> f64 {
+    let (w, h) = (f64::from(f.width()), f64::from(f.height()));
+    let (cx, cy) = (f64::from(i), f64::from(j));
+    let (x0, x1, y0, y1) = match edges {
+        EdgeMode::Wrap => (-w, 2.0 * w, -h, 2.0 * h),
+        EdgeMode::Clamp => (0.0, w, 0.0, h),
+    };
+    let mut best = w.min(h);
+    let steps = |a: f64, b: f64| ((b - a) * f64::from(n)) as u32;
+    for sy in 0..=steps(y0, y1) {
+        let y = y0 + f64::from(sy) / f64::from(n);
+        for sx in 0..=steps(x0, x1) {
+            let x = x0 + f64::from(sx) / f64::from(n);
+            let d = surface(f, edges, x, y);
+            if d < m - 1e-6 {
+                let dx = (cx - x).max(x - cx - 1.0).max(0.0);
+                let dy = (cy - y).max(y - cy - 1.0).max(0.0);
+                best = best.min(dx.hypot(dy) / (m - d));
+            }
+        }
+    }
+    best
+}
+
+#[test]
+fn cones_built_on_the_gpu_hold_and_are_as_wide_as_the_cpus() {
+    let Some(ctx) = gpu() else { return };
+    let passes = HeightPasses::new(&ctx.device);
+    let fields = [generate(Pattern::Cobblestones, 40, 24), waves(32, 32), noise(13, 9, 8), noise(1, 6, 9)];
+    for field in &fields {
+        let f16_field = rounded(field);
+        let (w, h) = (field.width(), field.height());
+        let maps = HeightMaps::new(&ctx, w, h, "cones").unwrap();
+        for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
+            let case = format!("{w}x{h} {edges:?}");
+            let opts = HeightPassOptions { edges, build_cones: true, ..HeightPassOptions::default() };
+            maps.upload_depths(&ctx, field.depths()).unwrap();
+            rebuild(&ctx, &passes, &maps, &opts);
+            // The rest of the maps are unchanged by the cones.
+            check_maps(&ctx, &maps, field, &opts, &case, &mut Worst::default());
+            let texels = ctx.read_texture(&maps.pyramid, 0).unwrap();
+            let stride = maps.pyramid.width();
+            let gpu = |x: u32, y: u32| texels[2 * (y * stride + x) as usize + 1];
+            let cpu = pomkit_core::cone::ConeMap::conservative(&f16_field, edges);
+            let (mut sum_gpu, mut sum_cpu) = (0.0f64, 0.0f64);
+            for y in 0..h {
+                for x in 0..w {
+                    let (g, c) = (gpu(x, y), cpu.ratio(x, y));
+                    assert!(g.is_finite() && g >= 0.0 && g <= cpu.cap(), "{case}: cone ({x}, {y}) is {g}");
+                    (sum_gpu, sum_cpu) = (sum_gpu + f64::from(g), sum_cpu + f64::from(c));
+                    // Against the definition, on a sample of footprints.
+                    if (x * 7 + y * 3) % 5 == 0 {
+                        let truth = brute_ratio(&f16_field, edges, f64::from(cpu.top(x, y)), x, y, 4);
+                        assert!(
+                            f64::from(g) <= truth * (1.0 + 1e-5) + 1e-6,
+                            "{case}: cone ({x}, {y}) is {g}, but a surface point allows only {truth}"
+                        );
+                    }
+                }
+            }
+            // The same search as the CPU's: as wide, up to the tolerance both keep.
+            let ratio = sum_gpu / sum_cpu;
+            println!("{case}: GPU cones are {ratio:.4} of the CPU's on average");
+            assert!(ratio > 0.97 && ratio < 1.03, "{case}: GPU cones are {ratio} of the CPU's on average");
+        }
+    }
+}
+
+/// The time of the GPU cone build (stage 4) at 128x128 and 256x256 against the rest of the
+/// rebuild, for docs/BENCHMARKS.md. Ignored: a measurement, not a check.
+#[test]
+#[ignore = "a measurement for docs/BENCHMARKS.md"]
+fn cone_build_time() {
+    let Some(ctx) = gpu() else { return };
+    println!("adapter: {}", ctx.describe());
+    let passes = HeightPasses::new(&ctx.device);
+    for n in [128, 256] {
+        for pattern in [Pattern::Cobblestones, Pattern::Waves] {
+            let field = generate(pattern, n, n);
+            let maps = HeightMaps::new(&ctx, n, n, "timing").unwrap();
+            maps.upload_depths(&ctx, field.depths()).unwrap();
+            let mut times = Vec::new();
+            for build_cones in [false, true] {
+                let opts = HeightPassOptions { build_cones, ..HeightPassOptions::default() };
+                let t = std::time::Instant::now();
+                rebuild(&ctx, &passes, &maps, &opts);
+                times.push(t.elapsed().as_secs_f64());
+            }
+            println!("{} {n}x{n}: rebuild {:.3} s, with cones {:.3} s", pattern.name(), times[0], times[1]);
+        }
+    }
 }

@@ -62,10 +62,16 @@ fn surface(ctx: &GpuContext, passes: &HeightPasses, pattern: Pattern, edges: Edg
     let params = trace_params(edges);
     let maps = HeightMaps::new(ctx, SIZE, SIZE, pattern.name()).expect("a 256x256 map fits");
     maps.upload_depths(ctx, field.depths()).expect("one depth per texel");
-    // The cones of the surface both sides trace, as the renderer writes them.
+    // The cones of the surface both sides trace: with wrap edges the CPU's, as the renderer
+    // writes them; with clamp edges built on the GPU (HeightPassOptions::build_cones), as a
+    // dynamic field gets them, so `cone`'s rays also check the GPU build.
     let cpu = Surface::new(field, edges, params.depth_scale);
-    maps.write_cones(&ctx.queue, Some(cpu.cones())).expect("the cones fit");
-    let opts = HeightPassOptions { edges, depth_scale: params.depth_scale, ..HeightPassOptions::default() };
+    let build_cones = edges == EdgeMode::Clamp;
+    if !build_cones {
+        maps.write_cones(&ctx.queue, Some(cpu.cones())).expect("the cones fit");
+    }
+    let opts =
+        HeightPassOptions { edges, depth_scale: params.depth_scale, build_cones, ..HeightPassOptions::default() };
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     passes.encode(&ctx.device, &mut encoder, &maps, &opts, None);
     ctx.queue.submit([encoder.finish()]);

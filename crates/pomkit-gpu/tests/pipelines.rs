@@ -470,3 +470,51 @@ fn material_on_a_host_height_texture_equals_the_material_on_the_field() {
         .expect("edge modes differ");
     assert!(e.to_string().contains("same edge mode"), "{e}");
 }
+
+/// The cone ratios in the material's pyramid (level 0, green), row-major.
+fn pyramid_cones(g: &Gpu, gm: &GpuMaterial) -> Vec<f32> {
+    let maps = gm.height.as_ref().expect("a height map");
+    let texels = g.ctx.read_texture(&maps.pyramid, 0).expect("read the pyramid");
+    let stride = maps.pyramid.width();
+    let (w, h) = (maps.width, maps.height);
+    (0..w * h).map(|k| texels[2 * ((k / w) * stride + k % w) as usize + 1]).collect()
+}
+
+#[test]
+fn a_cone_material_keeps_its_cones_in_step_with_its_heights() {
+    let Some(g) = gpu() else { return };
+    let g = g.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let m = material(Technique::Cone, 0.08, false);
+    let field = m.height.clone().expect("a height map");
+    let edges = m.trace.edges;
+    let gm = new_material(&g, &m);
+    // Built on the CPU from the material's heights.
+    let cpu = pomkit_core::cone::ConeMap::conservative(&field, edges);
+    let gpu_cones = pyramid_cones(&g, &gm);
+    assert!(gpu_cones.iter().enumerate().all(|(k, &c)| c == cpu.ratio(k as u32 % 128, k as u32 / 128)));
+    // New heights: the old cones go (`cone` walks as `exact`), until the GPU builds new ones.
+    let next = pomkit_core::procedural::generate(Pattern::Cobblestones, 128, 128);
+    gm.update_height(&g.ctx, &next).expect("same size");
+    let rebuild = |gm: &GpuMaterial| {
+        let mut encoder = g.ctx.device.create_command_encoder(&Default::default());
+        gm.encode_rebuild(&g.ctx.device, &g.pipelines, &mut encoder, None);
+        g.ctx.queue.submit([encoder.finish()]);
+    };
+    rebuild(&gm);
+    assert!(pyramid_cones(&g, &gm).iter().all(|&c| c == 0.0), "stale cones survived new heights");
+    gm.rebuild_cones();
+    rebuild(&gm);
+    let rounded: Vec<f32> = next.depths().iter().map(|&d| half::f16::from_f32(d).to_f32()).collect();
+    let truth = pomkit_core::cone::ConeMap::conservative(
+        &pomkit_core::HeightField::from_depths(128, 128, rounded).unwrap(),
+        edges,
+    );
+    let built = pyramid_cones(&g, &gm);
+    let (sum_gpu, sum_cpu) = built.iter().enumerate().fold((0.0f64, 0.0f64), |(a, b), (k, &c)| {
+        (a + f64::from(c), b + f64::from(truth.ratio(k as u32 % 128, k as u32 / 128)))
+    });
+    assert!((sum_gpu / sum_cpu - 1.0).abs() < 0.03, "GPU cones are {} of the CPU's on average", sum_gpu / sum_cpu);
+    // Built once: the next rebuild keeps them rather than searching again.
+    rebuild(&gm);
+    assert_eq!(pyramid_cones(&g, &gm), built);
+}
