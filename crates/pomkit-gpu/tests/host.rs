@@ -758,3 +758,32 @@ fn other_float_formats_are_read_by_channel() {
         println!("{label} channel {channel}: largest difference {e}, {n} texels differ");
     }
 }
+
+#[test]
+fn a_resource_with_cones_rebuilds_them_with_its_heights() {
+    let Some(ctx) = gpu() else { return };
+    let passes = HeightPasses::new(&ctx.device);
+    let (w, h) = (24, 16);
+    let (first, second) = (generate(Pattern::Bricks, w, h), second_field(w, h));
+    let opts = HeightResourceOptions { edges: EdgeMode::Clamp, cones: true, ..Default::default() };
+    let r = HeightResource::from_field(&ctx.device, &ctx.queue, &passes, &first, &opts, "coned").unwrap();
+    // The cones in the pyramid's level 0 (green), against the CPU's for the f16 heights.
+    let check = |field: &HeightField, case: &str| {
+        let texels = ctx.read_texture(&r.maps().pyramid, 0).unwrap();
+        let stride = r.maps().pyramid.width();
+        let f16: Vec<f32> = field.depths().iter().map(|&d| half::f16::from_f32(d).to_f32()).collect();
+        let cpu = pomkit_core::cone::ConeMap::conservative(&HeightField::from_depths(w, h, f16).unwrap(), opts.edges);
+        let (mut g, mut c) = (0.0f64, 0.0f64);
+        for y in 0..h {
+            for x in 0..w {
+                g += f64::from(texels[2 * (y * stride + x) as usize + 1]);
+                c += f64::from(cpu.ratio(x, y));
+            }
+        }
+        assert!(c > 0.0 && (g / c - 1.0).abs() < 0.03, "{case}: GPU cones are {} of the CPU's on average", g / c);
+    };
+    check(&first, "built");
+    r.update_field(&ctx.queue, &second).unwrap();
+    rebuild(&ctx, &passes, &r);
+    check(&second, "rebuilt for new heights");
+}
