@@ -791,15 +791,25 @@ impl<'a> Search<'a> {
             let dy = (cy0 - r.y1).max(r.y0 - cy1).max(0.0);
             (dx * dx + dy * dy).sqrt()
         };
-        let lower = |r: &Region| {
+        // The lower bound of region `r`, or infinity where it cannot matter; any value at or
+        // above `threshold` (which is all that is then needed of it) for a region that the
+        // distance bound alone already puts there.
+        let lower = |r: &Region, threshold: f64| {
             if r.min_depth >= m - LEVEL || !ahead(r.x0, r.x1, r.y0, r.y1) {
                 return f64::INFINITY;
+            }
+            let fall = m - r.min_depth;
+            let dx = (cx0 - r.x1).max(r.x0 - cx1).max(0.0);
+            let dy = (cy0 - r.y1).max(r.y0 - cy1).max(0.0);
+            let reach = threshold * fall;
+            if dx * dx + dy * dy >= reach * reach {
+                return threshold;
             }
             if relaxed && matches!(r.kind, Kind::Patch) && !self.may_exit(cx0, cy0, r) {
                 // Relaxed cones may hold surface where no ray from the top plane leaves it.
                 return f64::INFINITY;
             }
-            let b = dist(r) / (m - r.min_depth);
+            let b = (dx * dx + dy * dy).sqrt() / fall;
             b.max(self.near_bound(i64::from(i), i64::from(j), m, r))
         };
         // The ratio a surface point at (x, y) allows.
@@ -827,8 +837,12 @@ impl<'a> Search<'a> {
         // Regions too small to split keep their lower bound.
         let mut floor = f64::INFINITY;
         let top = self.pyramid.len() - 1;
-        let mut stack: Vec<(f64, Region)> =
-            self.tiles.iter().map(|&(tx, ty)| self.node(top, 0, 0, tx, ty)).map(|r| (lower(&r), r)).collect();
+        let mut stack: Vec<(f64, Region)> = self
+            .tiles
+            .iter()
+            .map(|&(tx, ty)| self.node(top, 0, 0, tx, ty))
+            .map(|r| (lower(&r, f64::INFINITY), r))
+            .collect();
         let mut children: Vec<(f64, Region)> = Vec::with_capacity(4);
         while let Some((lb, r)) = stack.pop() {
             if lb >= (best * (1.0 - SLACK)).min(floor) {
@@ -892,13 +906,20 @@ impl<'a> Search<'a> {
                     }
                 }
             }
-            for c in &mut children {
-                c.0 = lower(&c.1);
-            }
-            // The most promising child is searched first: pushed last.
-            children.sort_by(|a, b| b.0.total_cmp(&a.0));
             let threshold = (best * (1.0 - SLACK)).min(floor);
-            stack.extend(children.iter().filter(|c| c.0 < threshold));
+            for c in &mut children {
+                c.0 = lower(&c.1, threshold);
+            }
+            children.retain(|c| c.0 < threshold);
+            // The most promising child is searched first: pushed last.
+            for k in 1..children.len() {
+                let mut n = k;
+                while n > 0 && children[n - 1].0 < children[n].0 {
+                    children.swap(n - 1, n);
+                    n -= 1;
+                }
+            }
+            stack.extend(children.iter());
         }
         let ratio = (best * (1.0 - SLACK)).min(floor).clamp(0.0, self.cap);
         (ratio as f32, best_at)
