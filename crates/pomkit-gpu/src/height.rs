@@ -448,7 +448,9 @@ impl HeightPasses {
     ///
     /// Cost: about 17 texel reads and 5 writes per texel of the field (8 more reads with Sobel
     /// normals), in `1 + height_levels + pyramid_levels` dispatches; a small uniform buffer and
-    /// one bind group per dispatch are created per call.
+    /// one bind group per dispatch are created per call. Stage 4 costs a search per texel
+    /// instead, hundreds of texel reads (about 7 s for 256x256 on lavapipe, docs/BENCHMARKS.md).
+    /// With `opts.build_cones` false the cones last written stay.
     pub fn encode(
         &self,
         device: &wgpu::Device,
