@@ -4,9 +4,11 @@
 //! - `heights`: `Rgba16Float` with a full mip chain; R = depth d in [0, 1] (0 the surface, 1 the
 //!   deepest point), G = the parallax value `clamp(n_z * d, 0, 1)` that the `parallax`
 //!   technique reads.
-//! - `pyramid`: `R32Float`, the maximum-height (minimum-depth) pyramid of the exact tracer,
-//!   padded to powers of two; mip `l` holds level `l` in its top-left corner. It has no green
-//!   channel, so the library's `cone` technique walks it as `exact` does (the same hits).
+//! - `pyramid`: the maximum-height (minimum-depth) pyramid of the exact tracer, padded to powers
+//!   of two; mip `l` holds level `l` in its top-left corner, in red. `R32Float`, or for a
+//!   material drawn with the `cone` technique `Rg32Float` with the conservative cone ratios of
+//!   the texel footprints in mip 0's green ([`pomkit_core::cone::ConeMap`]), which the library's
+//!   `cone` walk steps on. (Without green, `cone` walks as `exact` does: the same hits.)
 //! - `normals`: `Rgba16Float`, the tangent-space normal (x along +u, y up the image, z out of
 //!   the surface) baked at Lengyel's scale `depth_scale * width`.
 
@@ -202,10 +204,29 @@ pub struct HeightImages {
 }
 
 /// Builds the textures of `field` for tracing with `edges` at `depth_scale` (UV units; the
-/// normals and the parallax values depend on it).
+/// normals and the parallax values depend on it), with an `R32Float` pyramid (no cones).
 #[must_use]
 pub fn height_images(field: &HeightField, edges: EdgeMode, depth_scale: f32) -> HeightImages {
+    height_images_with(field, edges, depth_scale, None)
+}
+
+/// [`height_images`], and if `cones` is given (built from `field` with `edges`: checked), an
+/// `Rg32Float` pyramid carrying them in mip 0's green for the `cone` technique.
+///
+/// # Panics
+/// If `cones` is not `field`'s size or was built for another edge mode (a caller's bug: build
+/// them with `ConeMap::conservative(field, edges)`).
+#[must_use]
+pub fn height_images_with(
+    field: &HeightField,
+    edges: EdgeMode,
+    depth_scale: f32,
+    cones: Option<&pomkit_core::cone::ConeMap>,
+) -> HeightImages {
     let (w, h) = (field.width(), field.height());
+    if let Some(c) = cones {
+        assert!(c.size() == (w, h) && c.edges() == edges, "cones of another map or edge mode");
+    }
     let surface = Surface::new(field.clone(), edges, depth_scale);
     let mips = surface.mips();
     let parallax = surface.parallax_mips();
@@ -230,12 +251,18 @@ pub fn height_images(field: &HeightField, edges: EdgeMode, depth_scale: f32) -> 
         let (lw, lh) = pyr.level_size(l);
         for y in 0..mh {
             for x in 0..mw {
-                let v = if x < lw && y < lh { pyr.min_depth(l, x, y) } else { 0.0 };
+                let inside = x < lw && y < lh;
+                let v = if inside { pyr.min_depth(l, x, y) } else { 0.0 };
                 bytes.extend_from_slice(&v.to_le_bytes());
+                if let Some(c) = cones {
+                    let ratio = if inside && l == 0 { c.ratio(x, y) } else { 0.0 };
+                    bytes.extend_from_slice(&ratio.to_le_bytes());
+                }
             }
         }
     }
-    let mut pyramid = image(pw, ph, pyr.len() as u32, TextureFormat::R32Float, bytes);
+    let format = if cones.is_some() { TextureFormat::Rg32Float } else { TextureFormat::R32Float };
+    let mut pyramid = image(pw, ph, pyr.len() as u32, format, bytes);
     pyramid.sampler = ImageSampler::nearest();
 
     let opts = NormalBakeOptions { scale: depth_scale * w as f32, filter: NormalFilter::Central, edges, y_down: false };
@@ -297,4 +324,44 @@ pub fn depth_image(field: &HeightField) -> Image {
     );
     image.data = Some(data);
     image
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pomkit_core::cone::ConeMap;
+    use pomkit_core::procedural::{Pattern, generate};
+
+    /// The `f32` values of `image`'s mip `level` (each mip `(w >> level) x (h >> level)`).
+    fn floats(image: &Image, level: u32, channels: usize) -> Vec<f32> {
+        let (w, h) = (image.width() as usize, image.height() as usize);
+        let start: usize = (0..level).map(|l| (w >> l).max(1) * (h >> l).max(1) * channels * 4).sum();
+        let len = (w >> level).max(1) * (h >> level).max(1) * channels * 4;
+        let data = image.data.as_ref().expect("built with data");
+        data[start..start + len].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+    }
+
+    #[test]
+    fn a_cone_pyramid_carries_the_cones_beside_the_same_bounds() {
+        // 24x20: padded to 32x32, so the padding is in every mip.
+        let field = generate(Pattern::Cobblestones, 24, 20);
+        let cones = ConeMap::conservative(&field, EdgeMode::Clamp);
+        let plain = height_images(&field, EdgeMode::Clamp, 0.08);
+        let coned = height_images_with(&field, EdgeMode::Clamp, 0.08, Some(&cones));
+        assert_eq!(plain.pyramid.texture_descriptor.format, TextureFormat::R32Float);
+        assert_eq!(coned.pyramid.texture_descriptor.format, TextureFormat::Rg32Float);
+        let levels = plain.pyramid.texture_descriptor.mip_level_count;
+        assert_eq!(coned.pyramid.texture_descriptor.mip_level_count, levels);
+        for l in 0..levels {
+            let (red, rg) = (floats(&plain.pyramid, l, 1), floats(&coned.pyramid, l, 2));
+            assert!(red.iter().zip(rg.chunks_exact(2)).all(|(&r, p)| r == p[0]), "mip {l}: red differs");
+            let stride = 32 >> l;
+            for (k, p) in rg.chunks_exact(2).enumerate() {
+                let (x, y) = ((k % stride) as u32, (k / stride) as u32);
+                let want = if l == 0 && x < 24 && y < 20 { cones.ratio(x, y) } else { 0.0 };
+                assert_eq!(p[1], want, "mip {l} texel ({x}, {y}): green");
+            }
+        }
+        assert!(cones.ratio(3, 3) > 0.0 || cones.ratio(10, 10) > 0.0, "a map without cones tests nothing");
+    }
 }

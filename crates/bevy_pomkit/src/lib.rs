@@ -170,6 +170,8 @@ struct Built {
     channel: Channel,
     edges: EdgeMode,
     depth_scale_bits: u32,
+    /// Whether the pyramid carries cone ratios (materials drawn with `cone`).
+    cones: bool,
 }
 
 /// Height resources of the materials in use: what each was built from, and which inputs were
@@ -285,6 +287,7 @@ fn build_height_maps(
             channel: e.channel,
             edges: e.trace.edges,
             depth_scale_bits: e.trace.depth_scale.to_bits(),
+            cones: e.technique == Technique::Cone,
         };
         let stale = maps.built.get(&id) != Some(&want) || changed.contains(&want.source);
         if stale {
@@ -317,7 +320,11 @@ fn build_height_maps(
                     let depth_scale = want_depth_scale(f32::from_bits(want.depth_scale_bits));
                     match height::depths_from_image(source, want.kind, want.channel) {
                         Ok(field) => {
-                            let built = height::height_images(&field, want.edges, depth_scale);
+                            // Cones cost a search per texel (about 1.5 s for 512x512 on two
+                            // cores): only for materials that step on them.
+                            let cones =
+                                want.cones.then(|| pomkit_core::cone::ConeMap::conservative(&field, want.edges));
+                            let built = height::height_images_with(&field, want.edges, depth_scale, cones.as_ref());
                             Ok(maps.store(&mut images, &want, cached, built))
                         }
                         Err(e) => {

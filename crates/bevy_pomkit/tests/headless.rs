@@ -174,7 +174,7 @@ fn hit_uv_agrees_with_pomkit_core_for_the_same_rays() {
     let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let field = generate(Pattern::Pyramids, 64, 64);
     let surface = Surface::new(field.clone(), EdgeMode::Wrap, 0.1);
-    for technique in [Technique::Exact, Technique::Pom, Technique::Relief] {
+    for technique in [Technique::Exact, Technique::Cone, Technique::Pom, Technique::Relief] {
         let s = Setup::new(field.clone(), technique);
         let (frame, rays) = render(&s);
         let pixels = inside(&rays, 0.02);
