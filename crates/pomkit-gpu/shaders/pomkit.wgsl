@@ -629,18 +629,45 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
 // Above a footprint's top the ray advances by the longer of the cone step and the stretch over
 // the footprint to its top or its far edge; at or below the top it solves the bilinear patches
 // there (as exact does at level 0). Conservative cones skip only empty space: the hit is exact.
+//
+// A negative green marks relaxed cones (Policarpo and Oliveira 2007; `write_cones` with a map
+// whose `relaxed()` is true), of ratio -green: they may hold surface, so after each cone step
+// one bilinear read says whether the ray went under, and `binary_steps` halvings of that step
+// find the crossing (relaxed cone stepping), as cone.rs does for a map read from an image.
 
 
 /// How far the walk lowers a cone's top: three times the largest rounding of a depth in [0, 1]
 /// to f16 (2^-12), so that a cone built for f32 depths holds for the f16 surface.
 const POMKIT_CONE_TOP_MARGIN: f32 = 0.000732421875;
 
+/// The bilinear surface's depth at texel coordinates `p` (texel centres at half-integers), from
+/// four mip-0 texels (cone.rs `surface_depth`).
+fn pomkit_surface_depth(heights: texture_2d<f32>, map: PomkitMap, p: vec2<f32>) -> f32 {
+    let s = p - 0.5;
+    let f = floor(s);
+    let w = s - f;
+    let i = i32(f.x);
+    let j = i32(f.y);
+    let d00 = pomkit_texel_depth(heights, map, i, j);
+    let d10 = pomkit_texel_depth(heights, map, i + 1, j);
+    let d01 = pomkit_texel_depth(heights, map, i, j + 1);
+    let d11 = pomkit_texel_depth(heights, map, i + 1, j + 1);
+    let top = d00 + (d10 - d00) * w.x;
+    let bottom = d01 + (d11 - d01) * w.x;
+    return top + (bottom - top) * w.y;
+}
+
 /// First t in [t0, t1] where the ray o + t d (texel x, y; depth z, going down) is at or below
 /// the bilinear surface, by cone stepping on the cones in `pyramid`'s mip 0; t = -1 when none.
-fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> PomkitWalk {
+/// `binary_steps` halvings refine a crossing found after a relaxed cone's step.
+fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32, binary_steps: u32) -> PomkitWalk {
     var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
     let horizontal = length(d.xy);
     var t = t0;
+    // A relaxed cone's step that went under the surface: [lo, hi] holds the crossing.
+    var bracketed = false;
+    var lo = 0.0;
+    var hi = 0.0;
     for (var it = 0u; it < POMKIT_EXACT_MAX_STEPS; it++) {
         if t >= t1 {
             break;
@@ -652,17 +679,30 @@ fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map
         let c = entered.cell;
         let cone = textureLoad(pyramid, vec2<i32>(c.ix, c.iy), 0).rg;
         state.fetches += 1u;
-        if cone.y <= 0.0 {
+        if cone.y == 0.0 {
             // No cone map here: exact's walk from this point on.
             let rest = pomkit_exact_first_hit(heights, pyramid, map, o, d, t, t1);
             return PomkitWalk(rest.t, state.fetches + rest.fetches);
         }
+        let relaxed = cone.y < 0.0;
         let top = cone.x - POMKIT_CONE_TOP_MARGIN;
         let z = o.z + d.z * t;
         if z < top {
-            let step = (top - z) / (d.z + horizontal / cone.y);
+            let step = (top - z) / (d.z + horizontal / abs(cone.y));
             let column = min((top - o.z) / d.z, entered.t_exit) - t;
-            t = min(t + max(step, column), t1);
+            let next = min(t + max(step, column), t1);
+            if relaxed && step > column {
+                // The look after a relaxed step.
+                state.fetches += 1u;
+                let q = o + d * next;
+                if pomkit_surface_depth(heights, map, q.xy) <= q.z {
+                    bracketed = true;
+                    lo = t;
+                    hi = next;
+                    break;
+                }
+            }
+            t = next;
             continue;
         }
         let h = pomkit_leaf_hit(heights, map, &state, o, d, t, min(entered.t_exit, t1), c);
@@ -671,7 +711,20 @@ fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map
         }
         t = entered.t_exit;
     }
-    return PomkitWalk(-1.0, state.fetches);
+    if !bracketed {
+        return PomkitWalk(-1.0, state.fetches);
+    }
+    for (var k = 0u; k < binary_steps; k++) {
+        let mid = 0.5 * (lo + hi);
+        let q = o + d * mid;
+        state.fetches += 1u;
+        if pomkit_surface_depth(heights, map, q.xy) <= q.z {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    return PomkitWalk(select(hi, 0.5 * (lo + hi), binary_steps > 0u), state.fetches);
 }
 
 // ===== module trace =====
@@ -965,7 +1018,7 @@ fn pomkit_trace_walk(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params:
     let d = vec3<f32>(s * map.size, 1.0);
     var walk: PomkitWalk;
     if cones {
-        walk = pomkit_cone_first_hit(heights, pyramid, map, o, d, 0.0, 1.0);
+        walk = pomkit_cone_first_hit(heights, pyramid, map, o, d, 0.0, 1.0, params.binary_steps);
     } else {
         walk = pomkit_exact_first_hit(heights, pyramid, map, o, d, 0.0, 1.0);
     }

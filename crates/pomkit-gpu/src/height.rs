@@ -247,7 +247,12 @@ impl HeightMaps {
     /// [`pomkit_core::cone::ConeMap`]) for the height passes to put into the pyramid's level 0
     /// (green), where the library's `cone` technique steps on them; `None` removes them (then
     /// `cone` walks as `exact` does). They stay until replaced: remove them when the heights
-    /// change. Run [`HeightPasses::encode`] afterwards.
+    /// change. Run [`HeightPasses::encode`] afterwards. Relaxed cones ([`ConeMap::relaxed`],
+    /// a map read from `pomkit bake cone --relaxed`) are stored negated, and the library then
+    /// walks them as relaxed cone stepping: a look after each cone step, then the
+    /// `binary_steps` halvings.
+    ///
+    /// [`ConeMap::relaxed`]: pomkit_core::cone::ConeMap::relaxed
     ///
     /// The cones hold for the depths they were built from; the GPU samples them rounded to
     /// f16, so the library lowers each top by `POMKIT_CONE_TOP_MARGIN` (three times that
@@ -270,7 +275,9 @@ impl HeightMaps {
         let mut bytes = Vec::with_capacity(self.width as usize * self.height as usize * 4);
         for y in 0..self.height {
             for x in 0..self.width {
-                bytes.extend_from_slice(&cones.map_or(0.0, |c| c.ratio(x, y)).to_le_bytes());
+                // Relaxed cones are marked by their sign (the library's cone.wesl).
+                let ratio = cones.map_or(0.0, |c| if c.relaxed() { -c.ratio(x, y) } else { c.ratio(x, y) });
+                bytes.extend_from_slice(&ratio.to_le_bytes());
             }
         }
         queue.write_texture(

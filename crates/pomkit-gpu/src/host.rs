@@ -558,7 +558,8 @@ impl HeightResource {
     /// Gives the library's `cone` technique its cones: `cones` must be built from the heights
     /// this resource holds, with its edge mode (`pomkit_core::cone::ConeMap::conservative`, or
     /// `cached`); `None` removes them. Run [`HeightResource::encode_rebuild`] afterwards: the
-    /// rebuild copies them into the pyramid. Without cones `cone` walks as `exact` does (the
+    /// rebuild copies them into the pyramid. Relaxed cones (a baked `--relaxed` map) make the
+    /// library's `cone` relaxed cone stepping. Without cones `cone` walks as `exact` does (the
     /// same hits); remove them when the heights change, or let the GPU build them at every
     /// rebuild instead ([`HeightResourceOptions::cones`]).
     ///
