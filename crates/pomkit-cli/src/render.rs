@@ -171,7 +171,7 @@ fn build_cones(scene: &Scene, modes: &[Mode]) -> Vec<std::sync::Arc<pomkit_core:
     scene
         .materials
         .iter()
-        .filter(|m| modes.iter().any(|mode| mode.technique(m.technique) == Technique::Cone))
+        .filter(|m| m.cones.is_none() && modes.iter().any(|mode| mode.technique(m.technique) == Technique::Cone))
         .filter_map(|m| {
             let field = m.height.as_ref()?;
             let edges = m.trace.sanitized().edges;

@@ -449,6 +449,11 @@ pub struct Material {
     /// curvature, [`crate::silhouette`]) and discard pixels whose ray leaves the relief, or
     /// leaves the unit UV square with clamped edges. Off by default (it then costs nothing).
     pub silhouette: bool,
+    /// The cones the `cone` technique steps on, for example a baked cone map (`pomkit bake
+    /// cone`, `--relaxed` for relaxed cone stepping) of `height` with the material's edge mode.
+    /// `None` (the default): conservative cones built from `height` when first needed
+    /// ([`crate::cone::cached`]). Cones of another size are ignored (the built ones are used).
+    pub cones: Option<Arc<crate::cone::ConeMap>>,
 }
 
 impl Default for Material {
@@ -467,6 +472,7 @@ impl Default for Material {
             shininess: 32.0,
             pixel_depth_offset: true,
             silhouette: false,
+            cones: None,
         }
     }
 }

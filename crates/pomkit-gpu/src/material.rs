@@ -523,8 +523,11 @@ impl GpuMaterial {
                 let maps = HeightMaps::new(ctx, field.width(), field.height(), &material.name)?;
                 maps.upload_depths(ctx, field.depths())?;
                 if technique == Technique::Cone {
-                    // The cones `cone` steps on, built on the CPU (pomkit_core::cone).
-                    maps.write_cones(&ctx.queue, Some(&pomkit_core::cone::cached(field, p.edges)))?;
+                    // The cones `cone` steps on: the material's own (a baked map) if they fit,
+                    // else built on the CPU (pomkit_core::cone).
+                    let own = material.cones.as_ref().filter(|c| c.check_size(field.width(), field.height()).is_ok());
+                    let cones = own.cloned().unwrap_or_else(|| pomkit_core::cone::cached(field, p.edges));
+                    maps.write_cones(&ctx.queue, Some(&cones))?;
                 }
                 Some(maps)
             }

@@ -59,6 +59,7 @@
 //! refine = 0                        # pom: secant refinement steps
 //! perspective_bias = 1.0            # pom-classic: 0 to 1 (1 = the exact parallax length)
 //! edges = "wrap"                    # wrap or clamp: texture addressing
+//! cone_map = "bricks_cone.png"      # cone: a baked cone map of the height map (bake cone)
 //! shadow = "none"                   # none, hard, soft, exact or depth self-shadowing
 //! softness = 0.1                    # soft: light's angular radius in radians, >= 0
 //! lod_threshold = 4.0               # mip level beyond which only normal mapping is done
@@ -242,7 +243,7 @@ pub enum SceneError {
         file: PathBuf,
         /// The material, e.g. `material "bricks"`.
         at: String,
-        /// `albedo`, `height` or `normal`.
+        /// `albedo`, `height`, `normal` or `cone_map`.
         field: String,
         /// Why the image failed; it names the image file.
         cause: Box<IoError>,
@@ -366,6 +367,7 @@ struct MaterialFile {
     shininess: Option<f32>,
     pixel_depth_offset: Option<bool>,
     silhouette: Option<bool>,
+    cone_map: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -924,6 +926,38 @@ impl Loader<'_> {
             }
         };
 
+        let cones = match (&m.cone_map, &height) {
+            (None, _) => None,
+            (Some(_), None) => {
+                return Err(self.invalid(
+                    at,
+                    "cone_map",
+                    "cone_map is set but the material has no height map: the cones belong to one",
+                ));
+            }
+            (Some(c), Some(field)) => match self.source(at, "cone_map", c)? {
+                Source::File(path) => {
+                    let map =
+                        crate::load_cone_map(&path, field.width(), field.height(), trace.edges).map_err(|source| {
+                            SceneError::Texture {
+                                file: self.file.to_owned(),
+                                at: at.to_owned(),
+                                field: "cone_map".to_owned(),
+                                cause: Box::new(source),
+                            }
+                        })?;
+                    Some(Arc::new(map))
+                }
+                Source::Builtin(..) => {
+                    return Err(self.invalid(
+                        at,
+                        "cone_map",
+                        format!("cone_map {c:?}: there are no built-in cone maps; leave cone_map out to build the cones from height"),
+                    ));
+                }
+            },
+        };
+
         Ok(Material {
             name,
             albedo,
@@ -938,6 +972,7 @@ impl Loader<'_> {
             shininess,
             pixel_depth_offset: m.pixel_depth_offset.unwrap_or(d.pixel_depth_offset),
             silhouette: m.silhouette.unwrap_or(d.silhouette),
+            cones,
         })
     }
 

@@ -706,3 +706,48 @@ fn a_scene_cache_loads_each_file_once_until_cleared() {
     let old = a.materials[0].height.as_ref().unwrap();
     assert_ne!(f.depths()[10], old.depths()[10], "the new file's values");
 }
+
+#[test]
+fn a_baked_cone_map_goes_with_its_height_map() {
+    let dir = tempfile::tempdir().unwrap();
+    write_assets(dir.path());
+    // Relaxed cones of the built-in cobblestones, as `pomkit bake cone --relaxed` writes them.
+    let field = procedural::generate(Pattern::Cobblestones, 32, 16);
+    let cones = pomkit_core::cone::ConeMap::relaxed_cones(&field, EdgeMode::Wrap);
+    let samples = cones.to_gray_alpha16();
+    write_image(&dir.path().join("cones.png"), 32, 16, PixelLayout::GrayAlpha16, Pixels::U16(&samples)).unwrap();
+    let scene_with = |material: &str| {
+        format!(
+            "[camera]\neye = [0.0, 2.0, 4.0]\ntarget = [0.0, 0.0, 0.0]\n\n[[material]]\nname = \"stone\"\n{material}\n\n\
+             [[object]]\nmesh = \"plane\"\nmaterial = \"stone\"\n"
+        )
+    };
+    let good = scene_with("height = \"builtin:cobblestones:32x16\"\ntechnique = \"cone\"\ncone_map = \"cones.png\"");
+    let scene = load_scene(&write(dir.path(), "scene.toml", good)).unwrap();
+    let loaded = scene.materials[0].cones.as_ref().expect("the cone map");
+    assert!(loaded.relaxed(), "a cone map read from an image is walked as relaxed cones");
+    assert_eq!(loaded.size(), (32, 16));
+    // The cones as baked: encoding rounds to the safe side, so a round trip may move a sample
+    // by one step, never more.
+    let again = loaded.to_gray_alpha16();
+    assert!(again.iter().zip(&samples).all(|(&a, &b)| a.abs_diff(b) <= 1), "the cones as baked");
+    // Without one, the cones are built when needed.
+    let plain = scene_with("height = \"builtin:cobblestones:32x16\"\ntechnique = \"cone\"");
+    assert!(load_scene(&write(dir.path(), "scene.toml", plain)).unwrap().materials[0].cones.is_none());
+
+    let fails = |material: &str| load_scene(&write(dir.path(), "scene.toml", scene_with(material))).unwrap_err();
+    // Another map's size: both sizes, and how to make the right one.
+    let err = fails("height = \"builtin:cobblestones:64x16\"\ncone_map = \"cones.png\"");
+    assert_names(&err, &["material \"stone\"", "cone_map", "cones.png", "32x16", "64x16", "bake cone"]);
+    assert_eq!(err.field(), Some("cone_map"));
+    // Not a cone map: a greyscale height image.
+    let err = fails("height = \"builtin:cobblestones:2x2\"\ncone_map = \"bricks_height.png\"");
+    assert_names(&err, &["cone_map", "bricks_height.png", "not a cone map"]);
+    // No height map for it to belong to; missing file; built-in.
+    assert_names(&fails("cone_map = \"cones.png\""), &["cone_map", "no height map"]);
+    assert_names(&fails("height = \"builtin:cobblestones:32x16\"\ncone_map = \"gone.png\""), &["cone_map", "gone.png"]);
+    assert_names(
+        &fails("height = \"builtin:cobblestones:32x16\"\ncone_map = \"builtin:cobblestones\""),
+        &["cone_map", "no built-in cone maps"],
+    );
+}
