@@ -315,7 +315,10 @@ pub struct HeightPassOptions {
     /// [`HeightPasses::encode`]) and put them into the pyramid's level 0, for the library's
     /// `cone` technique. Off by default: cones cost far more than the other passes (a search
     /// per texel, `pomkit_core::cone`), and only `cone` reads them. With it off, the cones last
-    /// written ([`HeightMaps::write_cones`] or an earlier build) stay.
+    /// written ([`HeightMaps::write_cones`] or an earlier build) stay. The build is one
+    /// dispatch of a search per texel: for large maps on a driver with a watchdog (Windows
+    /// stops a GPU job after about 2 s) build them on the CPU instead
+    /// (`pomkit_core::cone::ConeMap::conservative`, then [`HeightMaps::write_cones`]).
     pub build_cones: bool,
 }
 
