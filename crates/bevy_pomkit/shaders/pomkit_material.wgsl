@@ -121,7 +121,7 @@ fn trace_fragment(in: VertexOutput) -> Traced {
     s.uv = uv;
     s.raw_uv = in.uv;
     s.hit = PomkitHit(uv, 0.0, 0u);
-    // Gradients in uniform control flow, before any branch (the seeds' tex2Dgrad).
+    // Gradients in uniform control flow, before any branch (HLSL's tex2Dgrad in the published POM shaders, docs/REFERENCES.md).
     let duv_dx = dpdx(uv);
     let duv_dy = dpdy(uv);
     let draw_dx = dpdx(in.uv);

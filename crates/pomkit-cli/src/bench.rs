@@ -301,6 +301,15 @@ fn gpu_frames(gpu: &mut GpuRenderer, scene: &Scene, opts: &RenderOptions, name: 
     for i in 0..runs {
         for (index, field) in &heights {
             prepared.set_height(gpu.context(), *index, field).with_context(fail)?;
+            // set_height removes the cones (they described the old heights): give them back,
+            // as a program with a changing field and CPU-built cones would, so that `cone` is
+            // timed on its cones, not on exact's walk.
+            let m = &scene.materials[*index];
+            if opts.mode.technique(m.technique) == Technique::Cone {
+                let cones =
+                    m.cones.clone().unwrap_or_else(|| pomkit_core::cone::cached(field, m.trace.sanitized().edges));
+                prepared.set_cones(gpu.context(), *index, Some(&cones)).with_context(fail)?;
+            }
         }
         let out = gpu.draw(&mut prepared, scene).with_context(fail)?;
         if out.color.iter().any(|c| !c.is_finite()) {

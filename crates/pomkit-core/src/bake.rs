@@ -412,7 +412,7 @@ pub fn bake_parallax(field: &HeightField, opts: &NormalBakeOptions) -> Result<Ve
 }
 
 /// Bakes a packed RGBA8 map: the RGB8 normal ([`encode_rgb8`]) in RGB and the height (white =
-/// high) in alpha, the seeds' combined "NB" map.
+/// high) in alpha: the combined "NB" map of McGuire and McGuire 2005 (docs/REFERENCES.md).
 ///
 /// # Errors
 /// See [`NormalBakeOptions::validate`].

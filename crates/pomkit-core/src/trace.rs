@@ -139,7 +139,7 @@ pub enum Technique {
 }
 
 impl Technique {
-    /// Every technique: the seeds' cheapest first, then pomkit's own.
+    /// Every technique: the published ones, cheapest first, then pomkit's own.
     pub const ALL: [Technique; 10] = [
         Technique::Flat,
         Technique::Normal,

@@ -266,7 +266,7 @@ fn pomkit_parallax_at(heights: texture_2d<f32>, samp: sampler, uv: vec2<f32>, lo
 //
 // Call `pomkit_mip_level` with gradients taken in uniform control flow (`dpdx(uv)`, `dpdy(uv)`
 // at the top of the fragment shader), then trace at that level: the level stays fixed for the
-// whole ray, as the seeds' tex2Dgrad.
+// whole ray, as HLSL's tex2Dgrad does in the published POM shaders.
 
 /// Mip level for isotropic filtering of a `size`-texel texture with `max_level` as its last
 /// level, from the UV gradients (pomkit_core heightfield.rs `mip_level_from_gradients`).

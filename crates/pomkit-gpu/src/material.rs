@@ -804,6 +804,22 @@ impl GpuMaterial {
         Ok(())
     }
 
+    /// Gives the `cone` technique the cones of the current heights, built on the CPU
+    /// (`pomkit_core::cone::cached`, or a baked map), or removes them (`None`); the next
+    /// [`GpuMaterial::encode_rebuild`] puts them into the pyramid. Use after
+    /// [`GpuMaterial::update_height`], which removes the old heights' cones.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] if the material has no height map or the cones are not its
+    /// size.
+    pub fn set_cones(&self, ctx: &GpuContext, cones: Option<&pomkit_core::cone::ConeMap>) -> Result<(), GpuError> {
+        let maps = self
+            .height
+            .as_ref()
+            .ok_or_else(|| GpuError::Unsupported("giving cones to a material without a height map".into()))?;
+        maps.write_cones(&ctx.queue, cones)
+    }
+
     /// Has the next [`GpuMaterial::encode_rebuild`] build the cones of the current heights on
     /// the GPU ([`HeightPassOptions::build_cones`]), for the `cone` technique after
     /// [`GpuMaterial::update_height`] (which removes the old heights' cones: `cone` then walks

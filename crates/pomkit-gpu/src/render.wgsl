@@ -310,7 +310,7 @@ fn displaces() -> bool {
 }
 
 /// Screen-space derivatives, taken in uniform control flow at the top of the fragment stage
-/// (the seeds' tex2Dgrad): the mip levels and, for host vertices, the UV scale come from them.
+/// (HLSL's tex2Dgrad in the published POM shaders): the mip levels and, for host vertices, the UV scale come from them.
 struct Gradients {
     duv_dx: vec2<f32>,
     duv_dy: vec2<f32>,

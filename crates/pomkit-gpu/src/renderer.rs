@@ -481,6 +481,27 @@ impl GpuScene {
         Ok(())
     }
 
+    /// Gives material `index` the cones of its current heights (after
+    /// [`GpuScene::set_height`], which removes the old ones: `cone` then walks as `exact`), or
+    /// removes them; the next [`GpuRenderer::draw`] puts them into the pyramid.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] for an index out of range, a material without a height map or
+    /// cones of another size.
+    pub fn set_cones(
+        &mut self,
+        ctx: &GpuContext,
+        index: usize,
+        cones: Option<&pomkit_core::cone::ConeMap>,
+    ) -> Result<(), GpuError> {
+        let m = self.materials.get(index).ok_or_else(|| {
+            GpuError::Unsupported(format!("material {index} does not exist ({} materials)", self.materials.len()))
+        })?;
+        m.set_cones(ctx, cones)?;
+        self.dirty[index] = true;
+        Ok(())
+    }
+
     /// Moves the camera and changes the lights (and ambient light, and the LOD tint view) of a
     /// prepared scene without uploading anything else: the retained form for a moving camera or
     /// light. The next [`GpuRenderer::draw`] uses them. `scene` must be the scene this one was

@@ -243,7 +243,7 @@ fn ripple(k: u32) -> HeightField {
     })
 }
 
-/// Seed 004's dynamic height fields: the same GPU scene, its height map replaced each frame and
+/// Dynamic height fields (Tatarchuk 2006, docs/REFERENCES.md): the same GPU scene, its height map replaced each frame and
 /// rebuilt by the compute passes (mips, normals, parallax map, pyramid), matches a CPU render of
 /// that frame's field, frame after frame, and is not the previous frame.
 #[test]
@@ -388,4 +388,53 @@ fn given_relaxed_cones_render_alike_on_both_sides() {
     let (relaxed, conservative) = (fetches(&cpu_out), fetches(&cpu_exact));
     println!("fetches: relaxed {relaxed}, conservative {conservative}");
     assert!((relaxed - conservative).abs() > 0.01 * conservative, "the given cones were not used");
+}
+
+/// A new height field removes the old cones (`cone` then walks as `exact`: exact's picture, at
+/// exact's fetches plus the one read that finds no cone); `GpuScene::set_cones` gives the new
+/// field's back (the CPU's picture and fetches with cones).
+#[test]
+fn cones_come_back_with_set_cones_after_a_new_height_field() {
+    let Some(g) = gpu() else { return };
+    // Spikes on a floor at depth 0.8 (not 1: rays that end exactly on the volume's floor are
+    // counted differently by the f32 and f64 walks).
+    let spikes = |k: u32| {
+        HeightField::from_height_fn(96, 96, move |x, y| if (x * 7 + y * 13 + k) % 97 == 0 { 1.0 } else { 0.2 })
+    };
+    let cam = Camera {
+        eye: Vec3::new(0.0, 0.6, 1.9),
+        target: Vec3::new(0.0, 0.0, -0.3),
+        fov_y_deg: 40.0,
+        ..Camera::default()
+    };
+    let scene = one_object(Mesh::plane(Vec2::splat(2.0), 1), spikes(0), Technique::Cone, cam, Vec3::new(0.6, 0.5, 0.2));
+    let o = opts(160, 120, Mode::Material);
+    let mut r = g.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let mut gs = r.prepare(&scene, &o).expect("prepare");
+    let field = spikes(5);
+    let mut next = scene.clone();
+    next.materials[0].height = Some(Arc::new(field.clone()));
+    let fetches = |out: &RenderOutput| -> f32 { out.aovs.as_ref().map_or(0.0, |a| a.fetches.iter().sum()) };
+    let cpu_cone = render_cpu(&next, &o);
+    let cpu_exact = render_cpu(&next, &opts(160, 120, Mode::Technique(Technique::Exact)));
+    gs.set_height(r.context(), 0, &field).expect("same size");
+    let without = r.draw(&mut gs, &next).expect("draw");
+    let edges = next.materials[0].trace.sanitized().edges;
+    gs.set_cones(r.context(), 0, Some(&pomkit_core::cone::ConeMap::conservative(&field, edges))).expect("they fit");
+    let with = r.draw(&mut gs, &next).expect("draw");
+    let (f_cone, f_exact, f_without, f_with) =
+        (fetches(&cpu_cone), fetches(&cpu_exact), fetches(&without), fetches(&with));
+    println!("fetches: CPU cone {f_cone}, CPU exact {f_exact}; GPU without cones {f_without}, with {f_with}");
+    // Cone steps and exact's pyramid steps count differently (here cones cost more: docs/ACCURACY.md):
+    // the fetch totals tell the walks apart.
+    assert!((f_cone - f_exact).abs() > 0.1 * f_exact, "cones that change nothing test nothing");
+    assert!((f_with - f_without).abs() > 0.1 * f_without, "set_cones changed nothing");
+    assert_agree(&with, &cpu_cone, "new heights with their cones");
+    let (psnr, _) = compare(&without, &cpu_exact);
+    assert!(psnr >= 40.0, "without cones the picture is not exact's: {psnr:.1} dB");
+    assert!(f_without > 0.95 * f_exact, "without cones fewer fetches than exact's: {f_without} against {f_exact}");
+    // Errors, not panics.
+    assert!(gs.set_cones(r.context(), 3, None).is_err());
+    let small = pomkit_core::cone::ConeMap::conservative(&HeightField::constant(4, 4, 0.5), edges);
+    assert!(gs.set_cones(r.context(), 0, Some(&small)).is_err());
 }
