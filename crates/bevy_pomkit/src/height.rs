@@ -255,9 +255,7 @@ pub fn height_images_with(
                 let v = if inside { pyr.min_depth(l, x, y) } else { 0.0 };
                 bytes.extend_from_slice(&v.to_le_bytes());
                 if let Some(c) = cones {
-                    // Relaxed cones are marked by their sign (the library's cone.wesl).
-                    let sign = if c.relaxed() { -1.0 } else { 1.0 };
-                    let ratio = if inside && l == 0 { sign * c.ratio(x, y) } else { 0.0 };
+                    let ratio = if inside && l == 0 { pomkit_gpu::library::cone_green(c, x, y) } else { 0.0 };
                     bytes.extend_from_slice(&ratio.to_le_bytes());
                 }
             }

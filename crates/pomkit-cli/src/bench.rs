@@ -306,9 +306,7 @@ fn gpu_frames(gpu: &mut GpuRenderer, scene: &Scene, opts: &RenderOptions, name: 
             // timed on its cones, not on exact's walk.
             let m = &scene.materials[*index];
             if opts.mode.technique(m.technique) == Technique::Cone {
-                let cones =
-                    m.cones.clone().unwrap_or_else(|| pomkit_core::cone::cached(field, m.trace.sanitized().edges));
-                prepared.set_cones(gpu.context(), *index, Some(&cones)).with_context(fail)?;
+                prepared.set_cones(gpu.context(), *index, m.cones_to_trace().as_deref()).with_context(fail)?;
             }
         }
         let out = gpu.draw(&mut prepared, scene).with_context(fail)?;

@@ -477,6 +477,18 @@ impl Default for Material {
     }
 }
 
+impl Material {
+    /// The cones the `cone` technique steps on for this material: its own ([`Material::cones`])
+    /// if they are its height map's size, else the height map's conservative cones, built once
+    /// per height field ([`crate::cone::cached`], on every core). `None` without a height map.
+    #[must_use]
+    pub fn cones_to_trace(&self) -> Option<Arc<crate::cone::ConeMap>> {
+        let field = self.height.as_ref()?;
+        let own = self.cones.as_ref().filter(|c| c.check_size(field.width(), field.height()).is_ok());
+        Some(own.cloned().unwrap_or_else(|| crate::cone::cached(field, self.trace.sanitized().edges)))
+    }
+}
+
 /// A mesh placed in the world with a material.
 #[derive(Clone, Debug)]
 pub struct Object {

@@ -319,14 +319,12 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
             let params = m.trace.sanitized();
             let surface = m.height.as_ref().map(|f| {
                 let mut surface = Surface::new((**f).clone(), params.edges, params.depth_scale);
-                if technique == Technique::Cone {
-                    // The material's own (a baked map), else built once per height field (on
-                    // every core), not inside the first pixel's trace nor again for the next
-                    // frame. The built ones match in size by construction.
-                    let given = m.cones.as_ref().and_then(|c| surface.set_cones(c.clone()).ok());
-                    if given.is_none() {
-                        let _ = surface.set_cones(pomkit_core::cone::cached(f, params.edges));
-                    }
+                // The material's own cones or the field's, built once (not inside the first
+                // pixel's trace nor again for the next frame); either fits the field.
+                if technique == Technique::Cone
+                    && let Some(cones) = m.cones_to_trace()
+                {
+                    let _ = surface.set_cones(cones);
                 }
                 Arc::new(surface)
             });

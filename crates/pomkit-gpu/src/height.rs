@@ -275,8 +275,7 @@ impl HeightMaps {
         let mut bytes = Vec::with_capacity(self.width as usize * self.height as usize * 4);
         for y in 0..self.height {
             for x in 0..self.width {
-                // Relaxed cones are marked by their sign (the library's cone.wesl).
-                let ratio = cones.map_or(0.0, |c| if c.relaxed() { -c.ratio(x, y) } else { c.ratio(x, y) });
+                let ratio = cones.map_or(0.0, |c| crate::library::cone_green(c, x, y));
                 bytes.extend_from_slice(&ratio.to_le_bytes());
             }
         }

@@ -230,6 +230,14 @@ impl PomkitParams {
     }
 }
 
+/// What the library's `cone.wesl` reads from the pyramid's green channel (mip 0) for footprint
+/// `(x, y)` of `cones`: its cone ratio, negated for relaxed cones (which the walk then steps on
+/// with a look after each step). 0 means no cones.
+#[must_use]
+pub fn cone_green(cones: &pomkit_core::cone::ConeMap, x: u32, y: u32) -> f32 {
+    if cones.relaxed() { -cones.ratio(x, y) } else { cones.ratio(x, y) }
+}
+
 /// The value of the library's `POMKIT_WRAP` / `POMKIT_CLAMP` for `e`.
 #[must_use]
 pub const fn edges_index(e: EdgeMode) -> u32 {

@@ -490,8 +490,8 @@ pub struct GpuMaterial {
     /// The height field's GPU textures (mips, normals, parallax map, pyramid), if it has one.
     pub height: Option<HeightMaps>,
     height_options: HeightPassOptions,
-    /// Whether the next [`GpuMaterial::encode_rebuild`] builds the cones on the GPU: set when
-    /// the heights change under the `cone` technique, or `cone` is chosen without cones.
+    /// Whether the next [`GpuMaterial::encode_rebuild`] builds the cones on the GPU: set by
+    /// [`GpuMaterial::rebuild_cones`], or when [`GpuMaterial::set_params`] switches to `cone`.
     cones_stale: std::sync::atomic::AtomicBool,
     /// The material's uniform block: [`PomkitParams`] in its first 64 bytes.
     uniforms: wgpu::Buffer,
@@ -523,11 +523,8 @@ impl GpuMaterial {
                 let maps = HeightMaps::new(ctx, field.width(), field.height(), &material.name)?;
                 maps.upload_depths(ctx, field.depths())?;
                 if technique == Technique::Cone {
-                    // The cones `cone` steps on: the material's own (a baked map) if they fit,
-                    // else built on the CPU (pomkit_core::cone).
-                    let own = material.cones.as_ref().filter(|c| c.check_size(field.width(), field.height()).is_ok());
-                    let cones = own.cloned().unwrap_or_else(|| pomkit_core::cone::cached(field, p.edges));
-                    maps.write_cones(&ctx.queue, Some(&cones))?;
+                    // The cones `cone` steps on: the material's own, or built on the CPU.
+                    maps.write_cones(&ctx.queue, material.cones_to_trace().as_deref())?;
                 }
                 Some(maps)
             }

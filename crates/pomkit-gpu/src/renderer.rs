@@ -460,6 +460,13 @@ pub struct GpuScene {
 }
 
 impl GpuScene {
+    /// Material `index`, or an error naming it.
+    fn material(&self, index: usize) -> Result<&GpuMaterial, GpuError> {
+        self.materials.get(index).ok_or_else(|| {
+            GpuError::Unsupported(format!("material {index} does not exist ({} materials)", self.materials.len()))
+        })
+    }
+
     /// Replaces material `index`'s height field with `field` (same size): a dynamic height
     /// field. The next [`GpuRenderer::draw`] rebuilds its mips, normals, parallax map and
     /// maximum-height pyramid on the GPU before rendering.
@@ -473,9 +480,7 @@ impl GpuScene {
         index: usize,
         field: &pomkit_core::HeightField,
     ) -> Result<(), GpuError> {
-        let m = self.materials.get(index).ok_or_else(|| {
-            GpuError::Unsupported(format!("material {index} does not exist ({} materials)", self.materials.len()))
-        })?;
+        let m = self.material(index)?;
         m.update_height(ctx, field)?;
         self.dirty[index] = true;
         Ok(())
@@ -494,9 +499,7 @@ impl GpuScene {
         index: usize,
         cones: Option<&pomkit_core::cone::ConeMap>,
     ) -> Result<(), GpuError> {
-        let m = self.materials.get(index).ok_or_else(|| {
-            GpuError::Unsupported(format!("material {index} does not exist ({} materials)", self.materials.len()))
-        })?;
+        let m = self.material(index)?;
         m.set_cones(ctx, cones)?;
         self.dirty[index] = true;
         Ok(())
