@@ -615,7 +615,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
 
 // ===== module cone =====
 
-// pomkit shader library: the `cone` technique's walk, the twin of pomkit_core cone.rs
+// pomkit shader library: the `cone` technique's walk, the twin of pomkit_core cone/mod.rs
 // `first_hit` (docs/REFERENCES.md: Dummer 2006; Bán et al. 2024 for cones that hold for the
 // bilinear surface).
 //
@@ -633,7 +633,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
 // A negative green marks relaxed cones (Policarpo and Oliveira 2007; `write_cones` with a map
 // whose `relaxed()` is true), of ratio -green: they may hold surface, so after each cone step
 // one bilinear read says whether the ray went under, and `binary_steps` halvings of that step
-// find the crossing (relaxed cone stepping), as cone.rs does for a map read from an image.
+// find the crossing (relaxed cone stepping), as cone/mod.rs does for a map read from an image.
 
 
 /// How far the walk lowers a cone's top: three times the largest rounding of a depth in [0, 1]
@@ -641,7 +641,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
 const POMKIT_CONE_TOP_MARGIN: f32 = 0.000732421875;
 
 /// The bilinear surface's depth at texel coordinates `p` (texel centres at half-integers), from
-/// four mip-0 texels (cone.rs `surface_depth`).
+/// four mip-0 texels (cone/mod.rs `surface_depth`).
 fn pomkit_surface_depth(heights: texture_2d<f32>, map: PomkitMap, p: vec2<f32>) -> f32 {
     let s = p - 0.5;
     let f = floor(s);

@@ -320,14 +320,14 @@ fn pyramid_reduce_main(@builtin(global_invocation_id) id: vec3<u32>) {
 // ---------------------------------------------------------------------------------------------
 // Stage 4 (optional): conservative cone ratios, one footprint per invocation.
 //
-// Source: cone.rs `ConeMap::conservative`, the same branch and bound over the pyramid built by
-// stage 3, in f32 (cone.rs explains the definition and why each bound holds). Per footprint
+// Source: cone/mod.rs `ConeMap::conservative`, the same branch and bound over the pyramid built by
+// stage 3, in f32 (cone/mod.rs explains the definition and why each bound holds). Per footprint
 // C = [i, i + 1] x [j, j + 1] with top m (pyramid level 0), the ratio is the largest c with
 // dist(q, C) >= c (m - depth(q)) for every point q of the bilinear surface of heights mip 0:
 //
 // - a region (a pyramid cell, or a rectangle inside one bilinear patch) whose least depth is
 //   min_d bounds the ratio from below by dist(region, C) / (m - min_d); beside C also by the
-//   slope bound `cone_near_bound` (cone.rs `Search::near_bound`);
+//   slope bound `cone_near_bound` (cone/mod.rs `Search::near_bound`);
 // - corners of patch rectangles are surface points: each bounds it from above;
 // - regions whose lower bound is no better than the answer so far are dropped, others split;
 //   regions small for their distance, or under CONE_MIN_REGION texels, keep their lower bound.
@@ -347,9 +347,9 @@ fn pyramid_reduce_main(@builtin(global_invocation_id) id: vec3<u32>) {
 @group(0) @binding(2) var c_cones: texture_storage_2d<r32float, write>;
 @group(0) @binding(3) var<uniform> c_params: Params;
 
-/// cone.rs SLACK, FAR, MIN_REGION and LEVEL.
+/// cone/mod.rs SLACK, FAR, MIN_REGION and LEVEL.
 const CONE_SLACK: f32 = 0.0625;
-const CONE_FAR: f32 = 0.25;
+const CONE_FAR: f32 = 0.5;
 const CONE_MIN_REGION: f32 = 0.125;
 const CONE_LEVEL: f32 = 1e-6;
 const CONE_INF: f32 = 3.0e38;
@@ -443,7 +443,7 @@ fn c_patch_rect(r: vec4<f32>) -> ConeRegion {
 
 /// The largest slope across an edge, sign `sign`, of patch column or row `fixed`, at `x` or
 /// `y` = `at` across, over the stretch [a0, a1] along the edge (its ends and the patch boundary
-/// between them): cone.rs `near_bound`'s `along`.
+/// between them): cone/mod.rs `near_bound`'s `along`.
 fn c_edge_rate(along_x: bool, fixed: i32, sign: f32, at: f32, a0: f32, a1: f32) -> f32 {
     let mid = floor(a0) + 0.5;
     var points = array<f32, 3>(a0, a1, select(a0, mid, mid > a0 && mid < a1));
@@ -461,7 +461,7 @@ fn c_edge_rate(along_x: bool, fixed: i32, sign: f32, at: f32, a0: f32, a1: f32) 
     return rate;
 }
 
-/// cone.rs `Search::near_bound`: a lower bound on the ratio from how fast the surface can fall
+/// cone/mod.rs `Search::near_bound`: a lower bound on the ratio from how fast the surface can fall
 /// below the footprint's edge, for regions half a texel or less beside the footprint (corner
 /// `c`, integer texel `ij`, top `m`); 0 elsewhere.
 fn c_near_bound(ij: vec2<i32>, c: vec2<f32>, m: f32, r: vec4<f32>) -> f32 {
@@ -482,7 +482,7 @@ fn c_near_bound(ij: vec2<i32>, c: vec2<f32>, m: f32, r: vec4<f32>) -> f32 {
         let y = select(c.y - 0.25, c1.y + 0.25, below);
         rate = c_edge_rate(true, l, select(1.0, -1.0, below), y, r.x, r.y);
     } else if (right || left) && (below || above) {
-        // Off a corner b: m - depth(q) <= -e + a |v| + t |v|^2 with v = q - b (cone.rs).
+        // Off a corner b: m - depth(q) <= -e + a |v| + t |v|^2 with v = q - b (cone/mod.rs).
         let k = select(ij.x - 1, ij.x, right);
         let bx = select(c.x, c1.x, right);
         let sx = select(-1.0, 1.0, right);
@@ -583,7 +583,7 @@ fn cone_ratio(ij: vec2<i32>) -> f32 {
             best = min(best, c_point(c, m, r.rect.y, r.rect.z));
             best = min(best, c_point(c, m, r.rect.x, r.rect.w));
             best = min(best, c_point(c, m, r.rect.y, r.rect.w));
-            // Level with the footprint along one axis, the ratio is least at a corner (cone.rs).
+            // Level with the footprint along one axis, the ratio is least at a corner (cone/mod.rs).
             let band = (r.rect.z >= c.y && r.rect.w <= c.y + 1.0) || (r.rect.x >= c.x && r.rect.y <= c.x + 1.0);
             if band {
                 continue;

@@ -418,7 +418,7 @@ fn surface(f: &HeightField, edges: EdgeMode, x: f64, y: f64) -> f64 {
 
 /// The brute-force cone ratio of footprint `(i, j)` with top `m`: the least
 /// `dist(q, C) / (m - depth(q))` over surface points `q` every `1 / n` texel across the area a
-/// cone can reach (3 x 3 tiles with wrap edges, the map with clamp: cone.rs explains why).
+/// cone can reach (3 x 3 tiles with wrap edges, the map with clamp: cone/mod.rs explains why).
 /// Sampling can only miss the minimum, so this is at least the true ratio.
 fn brute_ratio(f: &HeightField, edges: EdgeMode, m: f64, i: u32, j: u32, n: u32) -> f64 {
     let (w, h) = (f64::from(f.width()), f64::from(f.height()));

@@ -57,7 +57,7 @@
 //!   of which ends the search. The answer is the smaller of `(1 - SLACK)` times that and the
 //!   bounds of the regions not split: never wider than the true cone, and at least
 //!   `(1 - SLACK) / (1 + FAR)` of it where the slope bound beside the footprint does not
-//!   decide (measured against brute force: 0.92 of it on average on noise, 0.89 on a smooth
+//!   decide (measured against brute force: 0.92 of it on average on noise, 0.86 on a smooth
 //!   sine field).
 //! - Each footprint starts from the point that decided its left neighbour's cone, which is
 //!   usually nearly as good for it, so most of the pyramid is pruned at once.
@@ -80,7 +80,7 @@ pub const SLACK: f64 = 1.0 / 16.0;
 
 /// A region whose diagonal is at most `FAR` times its distance from the footprint is not split:
 /// its lower bound is within a factor `1 + FAR` of the least ratio of its points.
-pub const FAR: f64 = 1.0 / 4.0;
+pub const FAR: f64 = 1.0 / 2.0;
 
 /// Regions smaller than this (texels, along both axes) are not split further; the ratio keeps
 /// their lower bound. Only regions touching the footprint's neighbourhood get this small.
@@ -515,6 +515,21 @@ pub(crate) fn first_hit(
 }
 
 /// The bilinear surface of `f`'s texels at `(x, y)` in texel units (centres at half-integers).
+/// `x.floor()` as an integer, without the library call that a baseline x86-64 build makes for
+/// `f64::floor` (the build floors for every region it looks at). `|x|` must be below 2^62.
+#[inline]
+pub(crate) fn floor_i(x: f64) -> i64 {
+    let t = x as i64;
+    t - i64::from((t as f64) > x)
+}
+
+/// `x.ceil()` as an integer, as [`floor_i`].
+#[inline]
+pub(crate) fn ceil_i(x: f64) -> i64 {
+    let t = x as i64;
+    t + i64::from((t as f64) < x)
+}
+
 fn surface_depth(f: &HeightField, edges: EdgeMode, x: f64, y: f64) -> f64 {
     bilinear(|i, j| f64::from(f.depth_at(i, j, edges)), x, y)
 }
@@ -524,7 +539,7 @@ fn surface_depth(f: &HeightField, edges: EdgeMode, x: f64, y: f64) -> f64 {
 #[inline]
 fn bilinear(texel: impl Fn(i64, i64) -> f64, x: f64, y: f64) -> f64 {
     let (sx, sy) = (x - 0.5, y - 0.5);
-    let (fx, fy) = (sx.floor(), sy.floor());
+    let (fx, fy) = (floor_i(sx) as f64, floor_i(sy) as f64);
     let (tx, ty) = (sx - fx, sy - fy);
     let (k, l) = (fx as i64, fy as i64);
     let top = texel(k, l) + (texel(k + 1, l) - texel(k, l)) * tx;
@@ -546,9 +561,10 @@ struct Region {
 #[derive(Clone, Copy, Debug)]
 enum Kind {
     /// Cell `(x, y)` of pyramid level `level`, in the tile `(tx, ty)` tiles from the map.
-    Node { level: usize, x: u32, y: u32, tx: i64, ty: i64 },
-    /// A rectangle inside one bilinear patch.
-    Patch,
+    Node { level: u8, x: u32, y: u32, tx: i8, ty: i8 },
+    /// A rectangle inside one bilinear patch, with the surface's depth at its corners
+    /// `(x0, y0)`, `(x1, y0)`, `(x0, y1)`, `(x1, y1)`.
+    Patch([f64; 4]),
 }
 
 struct Search<'a> {
@@ -558,7 +574,7 @@ struct Search<'a> {
     w: f64,
     h: f64,
     cap: f64,
-    tiles: Vec<(i64, i64)>,
+    tiles: Vec<(i8, i8)>,
     /// The least depth of the whole surface: a footprint whose top is that shallow has nothing
     /// above it.
     global_min: f64,
@@ -657,10 +673,10 @@ impl<'a> Search<'a> {
         // The points along an edge where the slope across it may peak: r's ends and the patch
         // boundary between them (texel centres lie on half-integers).
         let along = |a0: f64, a1: f64| {
-            let mid = a0.floor() + 0.5;
+            let mid = floor_i(a0) as f64 + 0.5;
             [a0, a1, if mid > a0 && mid < a1 { mid } else { a0 }]
         };
-        let patch_of = |a: f64| (a - 0.5).floor() as i64;
+        let patch_of = |a: f64| floor_i(a - 0.5);
         let rate = if (right || left) && across_y {
             let (k, sign, x) = if right { (i, -1.0, cx1 + 0.25) } else { (i - 1, 1.0, cx0 - 0.25) };
             along(r.y0, r.y1).into_iter().map(|y| sign * self.patch_slope(k, patch_of(y), x, y).0).fold(0.0, f64::max)
@@ -689,22 +705,22 @@ impl<'a> Search<'a> {
         if rate > 0.0 { 1.0 / rate } else { f64::INFINITY }
     }
 
-    fn node(&self, level: usize, x: u32, y: u32, tx: i64, ty: i64) -> Region {
+    fn node(&self, level: usize, x: u32, y: u32, tx: i8, ty: i8) -> Region {
         let ([x0, x1], [y0, y1]) = self.pyramid.cell_texels(level, x, y);
-        let (ox, oy) = (tx as f64 * self.w, ty as f64 * self.h);
+        let (ox, oy) = (f64::from(tx) * self.w, f64::from(ty) * self.h);
         Region {
             x0: f64::from(x0) + ox,
             x1: f64::from(x1) + ox,
             y0: f64::from(y0) + oy,
             y1: f64::from(y1) + oy,
             min_depth: f64::from(self.pyramid.min_depth(level, x, y)),
-            kind: Kind::Node { level, x, y, tx, ty },
+            kind: Kind::Node { level: level as u8, x, y, tx, ty },
         }
     }
 
     /// A rectangle inside one patch; its least depth is at a corner.
     fn patch_rect(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> Region {
-        let (k, l) = ((0.5 * (x0 + x1) - 0.5).floor(), (0.5 * (y0 + y1) - 0.5).floor());
+        let (k, l) = (floor_i(0.5 * (x0 + x1) - 0.5) as f64, floor_i(0.5 * (y0 + y1) - 0.5) as f64);
         let (ki, li) = (k as i64, l as i64);
         let (d00, d10, d01, d11) =
             (self.texel(ki, li), self.texel(ki + 1, li), self.texel(ki, li + 1), self.texel(ki + 1, li + 1));
@@ -713,8 +729,9 @@ impl<'a> Search<'a> {
             let top = d00 + (d10 - d00) * tx;
             top + (d01 + (d11 - d01) * tx - top) * ty
         };
-        let m = at(x0, y0).min(at(x1, y0)).min(at(x0, y1)).min(at(x1, y1));
-        Region { x0, x1, y0, y1, min_depth: m, kind: Kind::Patch }
+        let d = [at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1)];
+        let m = d[0].min(d[1]).min(d[2]).min(d[3]);
+        Region { x0, x1, y0, y1, min_depth: m, kind: Kind::Patch(d) }
     }
 
     /// The cone ratio of footprint `(i, j)` and the surface point that decided it, starting
@@ -733,7 +750,7 @@ impl<'a> Search<'a> {
         if self.edges == EdgeMode::Clamp && (r.x0 < 0.5 || r.y0 < 0.5 || r.x1 > self.w - 0.5 || r.y1 > self.h - 0.5) {
             return true;
         }
-        let (k, l) = ((0.5 * (r.x0 + r.x1) - 0.5).floor(), (0.5 * (r.y0 + r.y1) - 0.5).floor());
+        let (k, l) = (floor_i(0.5 * (r.x0 + r.x1) - 0.5) as f64, floor_i(0.5 * (r.y0 + r.y1) - 0.5) as f64);
         let (ki, li) = (k as i64, l as i64);
         let (d00, d10, d01, d11) =
             (self.texel(ki, li), self.texel(ki + 1, li), self.texel(ki, li + 1), self.texel(ki + 1, li + 1));
@@ -837,7 +854,7 @@ impl<'a> Search<'a> {
             if dx * dx + dy * dy >= reach * reach {
                 return threshold;
             }
-            if relaxed && matches!(r.kind, Kind::Patch) && !self.may_exit(cx0, cy0, r) {
+            if relaxed && matches!(r.kind, Kind::Patch(_)) && !self.may_exit(cx0, cy0, r) {
                 // Relaxed cones may hold surface where no ray from the top plane leaves it.
                 return f64::INFINITY;
             }
@@ -863,18 +880,15 @@ impl<'a> Search<'a> {
             }
         };
         // The ratio a surface point at (x, y) allows.
-        let point = |x: f64, y: f64| {
-            if !ahead(x, x, y, y) {
-                return f64::INFINITY;
-            }
-            let d = self.surface(x, y);
-            if d >= m - LEVEL {
+        let point_at = |x: f64, y: f64, d: f64| {
+            if !ahead(x, x, y, y) || d >= m - LEVEL {
                 return f64::INFINITY;
             }
             let dx = (cx0 - x).max(x - cx1).max(0.0);
             let dy = (cy0 - y).max(y - cy1).max(0.0);
             (dx * dx + dy * dy).sqrt() / (m - d)
         };
+        let point = |x: f64, y: f64| point_at(x, y, self.surface(x, y));
         // Nothing needs a ratio over the cap: start the search just above it.
         let mut best = self.cap / (1.0 - SLACK);
         let mut best_at = None;
@@ -917,6 +931,7 @@ impl<'a> Search<'a> {
                     }
                 }
                 Kind::Node { level, x, y, tx, ty } => {
+                    let level = usize::from(level);
                     let (cw, ch) = self.pyramid.level_size(level - 1);
                     for (cx, cy) in [(2 * x, 2 * y), (2 * x + 1, 2 * y), (2 * x, 2 * y + 1), (2 * x + 1, 2 * y + 1)] {
                         if cx < cw && cy < ch {
@@ -924,9 +939,10 @@ impl<'a> Search<'a> {
                         }
                     }
                 }
-                Kind::Patch => {
-                    for (x, y) in [(r.x0, r.y0), (r.x1, r.y0), (r.x0, r.y1), (r.x1, r.y1)] {
-                        let p = point(x, y);
+                Kind::Patch(d) => {
+                    for (k, (x, y)) in [(r.x0, r.y0), (r.x1, r.y0), (r.x0, r.y1), (r.x1, r.y1)].into_iter().enumerate()
+                    {
+                        let p = point_at(x, y, d[k]);
                         if p < best {
                             (best, best_at) = (p, Some((x, y)));
                         }
@@ -1064,7 +1080,7 @@ mod tests {
             }
             let mean = shares.iter().sum::<f64>() / shares.len() as f64;
             println!("smooth {edges:?}: mean share of the brute-force ratio {mean:.3}");
-            assert!(mean > 0.85, "{edges:?}: mean share {mean}");
+            assert!(mean > 0.8, "{edges:?}: mean share {mean}");
         }
     }
 

@@ -14,11 +14,14 @@
 //! [`MAX_SPAN`] patches wide, over the map's patches and a margin around it (patches outside
 //! the map repeat or clamp its texels as the edge mode says).
 
-use super::Search;
+use super::{Search, ceil_i, floor_i};
 
 /// The widest box (in patches along its longer side) the table answers for; wider boxes get
 /// no slope bound (their distance bound does well).
 pub(super) const MAX_SPAN: i64 = 128;
+
+/// Window sizes 1, 2, 4, ... MAX_SPAN.
+const LEVELS: usize = MAX_SPAN.ilog2() as usize + 1;
 
 /// Largest gradient norms of the bilinear surface over square windows of patches.
 pub(super) struct SlopeTable {
@@ -30,9 +33,10 @@ pub(super) struct SlopeTable {
     rows: i64,
     /// The slope one step of a stored value stands for.
     unit: f64,
-    /// Level `L`, at `(k, l)`: the largest gradient norm over the `2^L x 2^L` patches from
-    /// `(k, l)`, in steps of `unit`, rounded up.
-    levels: Vec<Vec<u16>>,
+    /// At `LEVELS * (l * cols + k) + L`: the largest gradient norm over the `2^L x 2^L`
+    /// patches from `(k, l)`, in steps of `unit`, rounded up. The levels of a patch are
+    /// together: one footprint's searches ask about boxes of every size around it.
+    windows: Vec<u16>,
 }
 
 impl SlopeTable {
@@ -65,34 +69,28 @@ impl SlopeTable {
         // Headroom below u16::MAX, and one step more than the rounded-up quotient, keep every
         // stored value at or above the slope it stands for despite rounding.
         let unit = if most > 0.0 { most / 65_000.0 } else { 1.0 };
-        let level0: Vec<u16> = base.iter().map(|&g| ((g / unit).ceil() + 1.0).min(65_535.0) as u16).collect();
-        drop(base);
-        let mut levels = vec![level0];
-        let mut size = 1;
-        while 2 * size <= MAX_SPAN {
-            let last = levels.last().expect("level 0 exists");
-            let next: Vec<u16> = (0..rows)
-                .into_par_iter()
-                .flat_map_iter(|r| {
-                    (0..cols).map(move |c| {
-                        let at = |c: i64, r: i64| {
-                            if c < cols && r < rows { last[(r * cols + c) as usize] } else { u16::MAX }
-                        };
-                        at(c, r).max(at(c + size, r)).max(at(c, r + size)).max(at(c + size, r + size))
-                    })
-                })
-                .collect();
-            levels.push(next);
-            size *= 2;
+        let mut windows = vec![u16::MAX; base.len() * LEVELS];
+        for (cell, &g) in base.iter().enumerate() {
+            windows[cell * LEVELS] = ((g / unit).ceil() + 1.0).min(65_535.0) as u16;
         }
-        Self { pad, cols, rows, unit, levels }
+        drop(base);
+        for level in 1..LEVELS {
+            let half = 1i64 << (level - 1);
+            for r in 0..rows - half {
+                for c in 0..cols - half {
+                    let at = |c: i64, r: i64| windows[(r * cols + c) as usize * LEVELS + level - 1];
+                    let most = at(c, r).max(at(c + half, r)).max(at(c, r + half)).max(at(c + half, r + half));
+                    windows[(r * cols + c) as usize * LEVELS + level] = most;
+                }
+            }
+        }
+        Self { pad, cols, rows, unit, windows }
     }
 
     /// Bytes the table holds for a `w x h` map.
     pub(super) fn bytes(w: u32, h: u32) -> u64 {
         let pad = (MAX_SPAN + MAX_SPAN / 2 + 2) as u64;
-        let levels = u64::from(MAX_SPAN.ilog2()) + 1;
-        (u64::from(w) + 2 * pad) * (u64::from(h) + 2 * pad) * 2 * levels
+        (u64::from(w) + 2 * pad) * (u64::from(h) + 2 * pad) * 2 * LEVELS as u64
     }
 
     /// An upper bound on the gradient norm of the surface over the box `[x0, x1] x [y0, y1]`
@@ -101,8 +99,8 @@ impl SlopeTable {
     pub(super) fn max_over(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> Option<f64> {
         // Patch k covers [k + 1/2, k + 3/2]: the patches that meet [x0, x1].
         let span = |a0: f64, a1: f64| {
-            let k0 = (a0 - 0.5).floor() as i64;
-            let k1 = ((a1 - 0.5).ceil() as i64 - 1).max(k0);
+            let k0 = floor_i(a0 - 0.5);
+            let k1 = (ceil_i(a1 - 0.5) - 1).max(k0);
             (k0, k1)
         };
         let ((k0, k1), (l0, l1)) = (span(x0, x1), span(y0, y1));
@@ -118,7 +116,6 @@ impl SlopeTable {
         let starts = |a0: i64, a1: i64, len: i64| -> [i64; 2] {
             if len >= s { [a0, a1 - s + 1] } else { [a0 - (s - len) / 2; 2] }
         };
-        let table = &self.levels[level as usize];
         let mut most = 0u16;
         for c in starts(k0, k1, nx) {
             for r in starts(l0, l1, ny) {
@@ -126,7 +123,7 @@ impl SlopeTable {
                 if c < 0 || r < 0 || c + s > self.cols || r + s > self.rows {
                     return None;
                 }
-                most = most.max(table[(r * self.cols + c) as usize]);
+                most = most.max(self.windows[(r * self.cols + c) as usize * LEVELS + level as usize]);
             }
         }
         Some(f64::from(most) * self.unit)
