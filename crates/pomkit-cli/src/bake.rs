@@ -179,7 +179,7 @@ pub struct ConeArgs {
     map: MapArgs,
     /// Relaxed cones (Policarpo and Oliveira 2007), built exactly for the bilinear surface: a ray
     /// from the top plane over a texel crosses the surface at most once inside its cone. Wider
-    /// than conservative cones where relief faces the texel (1.65 times on cobblestones, the
+    /// than conservative cones where relief faces the texel (1.27 times on cobblestones, the
     /// median); a tracer must look after each step. Without it: conservative cones, which hold
     /// no surface at all.
     #[arg(long)]

@@ -10,7 +10,80 @@
 use glam::Vec2;
 use rayon::prelude::*;
 
+use crate::heightfield::{EdgeMode, HeightField};
+use crate::procedural::{Pattern, generate};
 use crate::trace::{Hit, Ray, Surface, Technique, TraceParams, trace};
+
+/// The first crossing of `ray` with the bilinear surface of `field`, found by a search that
+/// shares nothing with the tracers: march the ray in steps of at most 1/100 texel of travel (and
+/// at least 20 000 of them), sampling the surface in `f64`, then bisect the first step that went
+/// under. Returns the depth of the crossing (0 where the ray starts under the surface, 1 where
+/// it reaches the floor without crossing). The truth the `exact` and `cone` tracers are tested
+/// against on the CPU and the GPU; slow (a few milliseconds a ray), so for tests and checks.
+#[must_use]
+pub fn brute_force_depth(field: &HeightField, edges: EdgeMode, ray: &Ray, depth_scale: f64) -> f64 {
+    let dir = ray.dir.as_dvec3().normalize();
+    let (w, h) = (f64::from(field.width()), f64::from(field.height()));
+    let s = (dir.x * depth_scale / -dir.z * w, dir.y * depth_scale / -dir.z * h);
+    let o = (f64::from(ray.uv.x) * w, f64::from(ray.uv.y) * h);
+    let surf = |x: f64, y: f64| {
+        let (x, y) = (x - 0.5, y - 0.5);
+        let (i, j) = (x.floor(), y.floor());
+        let (fx, fy) = (x - i, y - j);
+        let d = |a: f64, b: f64| f64::from(field.depth_at(a as i64, b as i64, edges));
+        let top = d(i, j) * (1.0 - fx) + d(i + 1.0, j) * fx;
+        let bot = d(i, j + 1.0) * (1.0 - fx) + d(i + 1.0, j + 1.0) * fx;
+        top * (1.0 - fy) + bot * fy
+    };
+    let below = |t: f64| t >= surf(o.0 + s.0 * t, o.1 + s.1 * t);
+    let travel = (s.0 * s.0 + s.1 * s.1).sqrt();
+    let steps = ((travel / 0.01).ceil() as usize).max(20_000);
+    if below(0.0) {
+        return 0.0;
+    }
+    let mut prev = 0.0;
+    for k in 1..=steps {
+        let t = k as f64 / steps as f64;
+        if below(t) {
+            let (mut lo, mut hi) = (prev, t);
+            for _ in 0..80 {
+                let mid = 0.5 * (lo + hi);
+                if below(mid) { hi = mid } else { lo = mid }
+            }
+            return hi;
+        }
+        prev = t;
+    }
+    1.0
+}
+
+/// Height fields of `n x n` texels whose surfaces are known in closed form, with their names:
+/// flat, a tilted plane, a step, a pyramid, a sphere cap and a one-texel spike. The exact
+/// tracers are checked on them against [`brute_force_depth`].
+#[must_use]
+pub fn analytic_fields(n: u32) -> Vec<(&'static str, HeightField)> {
+    let c = n as f32 / 2.0;
+    vec![
+        ("flat", HeightField::constant(n, n, 0.6)),
+        ("tilted plane", HeightField::from_height_fn(n, n, |x, _| 0.1 + 0.8 * x as f32 / (n - 1) as f32)),
+        ("step", HeightField::from_height_fn(n, n, |x, _| if x < n / 2 { 0.8 } else { 0.2 })),
+        (
+            "pyramid",
+            HeightField::from_height_fn(n, n, |x, y| {
+                let r = ((x as f32 + 0.5 - c).abs()).max((y as f32 + 0.5 - c).abs());
+                (1.0 - r / c).max(0.0)
+            }),
+        ),
+        (
+            "sphere cap",
+            HeightField::from_height_fn(n, n, |x, y| {
+                let r2 = ((x as f32 + 0.5 - c).powi(2) + (y as f32 + 0.5 - c).powi(2)) / (c * 0.8).powi(2);
+                (1.0 - r2).max(0.0).sqrt()
+            }),
+        ),
+        ("spike", generate(Pattern::Spike, n, n)),
+    ]
+}
 
 /// The seed `pomkit compare` uses unless told otherwise.
 pub const DEFAULT_SEED: u64 = 1;

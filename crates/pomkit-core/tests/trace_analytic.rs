@@ -23,42 +23,9 @@ fn texels(a: Vec2, b: Vec2) -> f32 {
     ((a - b) * N as f32).length()
 }
 
-/// Independent truth: march the ray in steps far below a texel, sampling the bilinear surface
-/// in f64, then bisect the first bracket. Returns the hit depth.
+/// Independent truth: pomkit_core::accuracy::brute_force_depth.
 fn brute_force(f: &HeightField, edges: EdgeMode, ray: &Ray, depth_scale: f64) -> f64 {
-    let dir = ray.dir.as_dvec3().normalize();
-    let (w, h) = (f64::from(f.width()), f64::from(f.height()));
-    let s = (dir.x * depth_scale / -dir.z * w, dir.y * depth_scale / -dir.z * h);
-    let o = (f64::from(ray.uv.x) * w, f64::from(ray.uv.y) * h);
-    let surf = |x: f64, y: f64| {
-        let (x, y) = (x - 0.5, y - 0.5);
-        let (i, j) = (x.floor(), y.floor());
-        let (fx, fy) = (x - i, y - j);
-        let d = |a: f64, b: f64| f64::from(f.depth_at(a as i64, b as i64, edges));
-        let top = d(i, j) * (1.0 - fx) + d(i + 1.0, j) * fx;
-        let bot = d(i, j + 1.0) * (1.0 - fx) + d(i + 1.0, j + 1.0) * fx;
-        top * (1.0 - fy) + bot * fy
-    };
-    let below = |t: f64| t >= surf(o.0 + s.0 * t, o.1 + s.1 * t);
-    let travel = (s.0 * s.0 + s.1 * s.1).sqrt();
-    let steps = ((travel / 0.01).ceil() as usize).max(20_000);
-    let mut prev = 0.0;
-    if below(0.0) {
-        return 0.0;
-    }
-    for k in 1..=steps {
-        let t = k as f64 / steps as f64;
-        if below(t) {
-            let (mut lo, mut hi) = (prev, t);
-            for _ in 0..80 {
-                let mid = 0.5 * (lo + hi);
-                if below(mid) { hi = mid } else { lo = mid }
-            }
-            return hi;
-        }
-        prev = t;
-    }
-    1.0
+    pomkit_core::accuracy::brute_force_depth(f, edges, ray, depth_scale)
 }
 
 /// The point of the ray at depth z.
@@ -79,29 +46,9 @@ fn rays_over(count: usize, angle_deg: f32, seed: u32) -> Vec<Ray> {
         .collect()
 }
 
-/// Analytic fields with their names; values are heights (white = high).
+/// Analytic fields with their names (pomkit_core::accuracy::analytic_fields).
 fn analytic_fields() -> Vec<(&'static str, HeightField)> {
-    let c = N as f32 / 2.0;
-    vec![
-        ("flat", HeightField::constant(N, N, 0.6)),
-        ("tilted plane", HeightField::from_height_fn(N, N, |x, _| 0.1 + 0.8 * x as f32 / (N - 1) as f32)),
-        ("step", HeightField::from_height_fn(N, N, |x, _| if x < N / 2 { 0.8 } else { 0.2 })),
-        (
-            "pyramid",
-            HeightField::from_height_fn(N, N, |x, y| {
-                let r = ((x as f32 + 0.5 - c).abs()).max((y as f32 + 0.5 - c).abs());
-                (1.0 - r / c).max(0.0)
-            }),
-        ),
-        (
-            "sphere cap",
-            HeightField::from_height_fn(N, N, |x, y| {
-                let r2 = ((x as f32 + 0.5 - c).powi(2) + (y as f32 + 0.5 - c).powi(2)) / (c * 0.8).powi(2);
-                (1.0 - r2).max(0.0).sqrt()
-            }),
-        ),
-        ("spike", generate(Pattern::Spike, N, N)),
-    ]
+    pomkit_core::accuracy::analytic_fields(N)
 }
 
 #[test]

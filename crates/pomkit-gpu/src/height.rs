@@ -23,8 +23,8 @@
 //! # Ok::<(), pomkit_gpu::GpuError>(())
 //! ```
 
-use pomkit_core::EdgeMode;
 use pomkit_core::bake::NormalFilter;
+use pomkit_core::{EdgeMode, HeightField};
 use wgpu::util::DeviceExt;
 
 use crate::util::{Std140, rgba16f_bytes};
@@ -88,6 +88,14 @@ pub struct HeightMaps {
     /// green ([`HeightMaps::write_cones`]); 0 (no cones) until written.
     cones: wgpu::Texture,
     cones_view: wgpu::TextureView,
+}
+
+/// `field` with its depths rounded to f16 as [`HeightMaps::upload_depths`] stores them: the
+/// surface the GPU samples, so the one to compare the GPU's answers with on the CPU.
+#[must_use]
+pub fn f16_surface(field: &HeightField) -> HeightField {
+    let depths = field.depths().iter().map(|&d| half::f16::from_f32(d).to_f32()).collect();
+    HeightField::from_depths(field.width(), field.height(), depths).expect("f16 rounding keeps depths in [0, 1]")
 }
 
 impl HeightMaps {

@@ -28,11 +28,6 @@ fn rebuild(ctx: &GpuContext, passes: &HeightPasses, maps: &HeightMaps, opts: &He
     ctx.wait().expect("device lost");
 }
 
-/// `x` rounded to f16 and back, as `upload_depths` stores it.
-fn f16r(x: f32) -> f32 {
-    half::f16::from_f32(x).to_f32()
-}
-
 /// Half an f16 step at `v` (the shader rounds to the nearest f16 before storing) plus slack for
 /// f32 rounding-order differences between CPU and GPU.
 fn f16_half_step(v: f32) -> f32 {
@@ -41,8 +36,7 @@ fn f16_half_step(v: f32) -> f32 {
 
 /// The field with its depths rounded to f16: the surface the GPU actually has.
 fn rounded(field: &HeightField) -> HeightField {
-    HeightField::from_depths(field.width(), field.height(), field.depths().iter().map(|&d| f16r(d)).collect())
-        .expect("rounded depths stay in [0, 1]")
+    pomkit_gpu::height::f16_surface(field)
 }
 
 /// `Surface::new`'s parallax map: clamp(n_z * d) from central normals at depth_scale * width;

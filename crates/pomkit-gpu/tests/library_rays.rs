@@ -40,8 +40,7 @@ fn gpu() -> Option<GpuContext> {
 
 /// The field with its depths rounded to f16: the surface the GPU actually has.
 fn rounded(field: &HeightField) -> HeightField {
-    let d = field.depths().iter().map(|&d| half::f16::from_f32(d).to_f32()).collect();
-    HeightField::from_depths(field.width(), field.height(), d).expect("rounded depths stay in [0, 1]")
+    pomkit_gpu::height::f16_surface(field)
 }
 
 /// The trace parameters: the defaults, with pom's secant refinement on so that it is compared too.
