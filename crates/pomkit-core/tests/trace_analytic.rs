@@ -56,7 +56,7 @@ fn exact_matches_brute_force_on_analytic_fields_at_every_angle() {
     for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
         for (name, f) in analytic_fields() {
             let s = surface(f.clone(), edges);
-            for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0] {
+            for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
                 for ray in rays_over(24, angle, 7) {
                     let hit = trace(&s, &ray, Technique::Exact, &params(edges));
                     let truth = brute_force(&f, edges, &ray, 0.1);
