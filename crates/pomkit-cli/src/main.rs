@@ -68,6 +68,7 @@ struct ViewArgs {
     overlay: Option<String>,
 }
 
+#[cfg(feature = "view")]
 fn view(args: &ViewArgs) -> Result<()> {
     let compare =
         args.compare.as_deref().map(str::parse::<pomkit_core::trace::Technique>).transpose().context("--compare")?;
@@ -89,6 +90,14 @@ fn view(args: &ViewArgs) -> Result<()> {
         eprintln!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// `pomkit view` in a build without the viewer.
+#[cfg(not(feature = "view"))]
+fn view(_args: &ViewArgs) -> Result<()> {
+    anyhow::bail!(
+        "this pomkit was built without the viewer (the `view` feature, on by default): reinstall it without --no-default-features to use `pomkit view`"
+    )
 }
 
 /// Building a texel's cone costs about as much as baking 16 texels of a normal map: the weight
@@ -347,5 +356,15 @@ fn main() -> ExitCode {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(all(test, not(feature = "view")))]
+mod headless {
+    #[test]
+    fn view_without_the_viewer_says_how_to_get_it() {
+        let args = super::ViewArgs { scene: None, screenshot: None, compare: None, overlay: None };
+        let err = super::view(&args).unwrap_err().to_string();
+        assert!(err.contains("without the viewer") && err.contains("--no-default-features"), "{err}");
     }
 }

@@ -20,7 +20,7 @@ pub struct RenderArgs {
     /// Scene file (TOML; see docs/SCENES.md). Without one, the built-in demo scene: bricks,
     /// pyramids, cobblestones and raised text on a plane, a cube and a sphere.
     scene: Option<PathBuf>,
-    /// Output PNG. AOVs go beside it as OUT.<name>.exr. Every output appears only when the whole
+    /// Output PNG. AOVs go beside it as OUT.NAME.exr. Every output appears only when the whole
     /// run succeeds, may not be a file the scene reads, and may not be read-only; a symbolic
     /// link is written through (the file it points to is replaced, the link stays).
     #[arg(short, long, default_value = "pomkit.png")]

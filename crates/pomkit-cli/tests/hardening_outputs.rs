@@ -206,6 +206,7 @@ fn render_leaves_no_png_when_an_aov_cannot_be_written() {
 }
 
 #[test]
+#[cfg(feature = "view")]
 fn view_screenshot_over_a_scene_input_is_refused_before_the_window_opens() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

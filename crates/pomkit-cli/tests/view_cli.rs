@@ -6,6 +6,9 @@
 //! adapter, Mesa's lavapipe included. Without a display or an adapter the tests print
 //! "skipping: <reason>" and pass, unless `POMKIT_REQUIRE_GPU=1`, where they fail.
 
+// The viewer is the CLI's `view` feature (on by default).
+#![cfg(feature = "view")]
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

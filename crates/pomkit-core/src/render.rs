@@ -70,7 +70,7 @@ pub struct Aovs {
     pub lod: Vec<f32>,
 }
 
-/// What [`CpuRenderer::render`] returns.
+/// What `CpuRenderer::render` (pomkit-cpu) returns.
 #[derive(Clone, Debug)]
 pub struct RenderOutput {
     /// Width in pixels.

@@ -7,7 +7,7 @@
 //! Praun, Finkelstein and Hoppe 2001 (self-shadowing that grows with depth, no shadow ray). The
 //! sources are listed in docs/REFERENCES.md.
 //!
-//! The light direction uses the ray convention of [`crate::trace`]: `(du, dv, dz)` *toward* the
+//! The light direction uses the ray convention of [`crate::trace()`]: `(du, dv, dz)` *toward* the
 //! light, with `dz > 0` for a light above the surface. Visibility is 1 for lit, 0 for shadowed.
 
 use glam::{DVec3, Vec2, Vec3};
@@ -25,8 +25,8 @@ pub enum ShadowMode {
     /// McGuire 2005). Between `min_samples` and `max_samples` fetches; aliases into stairs on
     /// thin blockers.
     Hard,
-    /// Tatarchuk 2006's penumbra estimate: each sample's blocker elevation is weighed by its
-    /// distance from the receiver and the darkest sample wins. Same fetches as `Hard`; soft,
+    /// A horizon-angle penumbra estimate after Tatarchuk 2006: each sample's blocker elevation
+    /// is weighed by its distance from the receiver and the darkest sample wins. Same fetches as `Hard`; soft,
     /// stable edges; no contact hardening for very thin features.
     Soft,
     /// The exact tracer along the light ray: shadowed if the ray meets the bilinear surface.

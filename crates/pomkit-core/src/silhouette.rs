@@ -134,11 +134,11 @@ impl Profile for Bend {
 
 /// Traces `ray` into `surface` with `technique` under a surface of curvature `curvature` along
 /// the ray ([`view_curvature`]; 0 is the flat tangent plane, where the hit equals
-/// [`crate::trace`]'s).
+/// [`crate::trace()`]'s).
 ///
-/// Parameters are sanitized as [`crate::trace`] does; a non-finite curvature counts as 0 and
+/// Parameters are sanitized as [`crate::trace()`] does; a non-finite curvature counts as 0 and
 /// larger magnitudes than [`MAX_CURVATURE`] are clamped. Every loop is bounded as in
-/// [`crate::trace`] (`exact` walks at most 16 chords, each within its own bound).
+/// [`crate::trace()`] (`exact` walks at most 16 chords, each within its own bound).
 #[must_use]
 pub fn trace_curved(
     surface: &Surface,

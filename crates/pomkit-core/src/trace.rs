@@ -481,7 +481,7 @@ impl Surface {
     /// A ray's UV travel per unit of depth is at most `depth_scale / MIN_COS` (the flattest ray
     /// accepted), so it crosses at most `depth_scale / MIN_COS * width + 2` texel columns and as
     /// many rows (scaled by the height); the traversal makes at most
-    /// `2 * (columns + rows) + 3` steps ([`exact_step_bound`]) and at most 4 fetches per step
+    /// `2 * (columns + rows) + 3` steps (`exact_step_bound`) and at most 4 fetches per step
     /// (one pyramid gather, up to three bilinear patches). This is a proof of termination, not
     /// the typical cost: the pyramid skips empty stretches a tile at a time, so a typical ray
     /// makes O(log size) fetches per tile it crosses.
@@ -594,7 +594,7 @@ pub(crate) fn entering(dir: Vec3) -> Option<Vec3> {
 /// surface's (`iterative`'s parallax map uses the surface's).
 ///
 /// Where the surface's edges wrap, the entry point is first reduced to its tile
-/// ([`reduce_to_tile`]): the trace runs from `uv - floor(uv)` and the hit is moved back by the
+/// (`reduce_to_tile`): the trace runs from `uv - floor(uv)` and the hit is moved back by the
 /// same whole number of tiles, so the returned UV stays in the ray's own tile frame (not wrapped
 /// into `[0, 1]`) and the result does not depend on which tile the ray enters, up to the f32
 /// rounding of the returned UV: at `|u| = 1e15` an f32 cannot hold a sub-tile offset, so the

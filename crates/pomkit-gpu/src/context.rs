@@ -76,8 +76,8 @@ impl GpuContext {
         Ok(Self { device, queue, info: adapter.get_info(), timestamps })
     }
 
-    /// Wraps a device the caller already has. `timestamps` must only be true if the device was
-    /// created with [`wgpu::Features::TIMESTAMP_QUERY`].
+    /// Wraps a device the caller already has. GPU timestamps are used if the device was created
+    /// with [`wgpu::Features::TIMESTAMP_QUERY`], and not otherwise.
     #[must_use]
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Self {
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);

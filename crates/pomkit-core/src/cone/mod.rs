@@ -38,9 +38,9 @@
 //!   square `D` half a texel around `C` (the four patches that meet `C`) also by `1 / L`, where
 //!   `L` bounds the surface's slope there (the surface can fall below `m` no faster than that
 //!   from `C`'s edge).
-//!   Near the footprint (regions up to [`slope::MAX_SPAN`] texels across, with the footprint)
+//!   Near the footprint (regions up to 128 texels across, with the footprint)
 //!   also by `1 / G`, where `G` is the largest slope of the surface over the box holding the
-//!   region and the side of `C` facing it ([`slope`]): along the segment from a point to its
+//!   region and the side of `C` facing it (`cone/slope.rs`): along the segment from a point to its
 //!   nearest point of `C` the surface can rise no faster. On smooth relief this bound prunes
 //!   the neighbourhood that the distance bound must split down to small rectangles, and the
 //!   cones come out wider (fewer regions stop at [`MIN_REGION`] with their lower bound).
