@@ -34,10 +34,6 @@ p95_error is the nearest-rank 95th percentile.")]
 pub struct CompareArgs {
     #[command(flatten)]
     height: HeightOption,
-    /// How far below the surface, in UV units, the deepest point lies (Bevy's
-    /// parallax_depth_scale): greater than 0 and at most 16 (tile widths).
-    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true, value_name = "S")]
-    depth_scale: f32,
     /// View angles from the normal, in degrees, comma-separated, each in [0, 90).
     #[arg(long, default_value = "0,30,60,75,85", allow_hyphen_values = true, value_name = "DEG,..")]
     angles: String,
@@ -73,7 +69,7 @@ pub enum Format {
 }
 
 pub fn run(a: &CompareArgs) -> Result<()> {
-    let params = a.options.params(a.depth_scale)?;
+    let params = a.options.params()?;
     let angles = parse_angles(&a.angles)?;
     let techniques = technique::parse_list(&a.techniques)?;
     if !(1..=MAX_RAYS).contains(&a.rays) {

@@ -4,9 +4,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use pomkit_core::compose::{self, Image};
 use pomkit_core::scene::Scene;
 use pomkit_core::trace::Technique;
-use pomkit_cpu::compose::{self, Image};
 use pomkit_cpu::{CpuRenderer, Mode, RenderOptions, RenderOutput};
 use pomkit_gpu::{GpuRenderError, GpuRenderer};
 use pomkit_io::output::{OutputId, Outputs};
@@ -247,7 +247,7 @@ fn render_cpu(scene: &Scene, opts: &RenderOptions, what: &str, samples: u64) -> 
 }
 
 fn image_of(out: &RenderOutput) -> Image {
-    Image { width: out.width, height: out.height, pixels: out.to_srgb8() }
+    Image::from(out)
 }
 
 fn write_png(outs: &mut Outputs, id: OutputId, img: &Image) -> Result<()> {

@@ -4,55 +4,57 @@
 use anyhow::{Result, bail};
 use clap::Args;
 use clap::builder::{PossibleValuesParser, TypedValueParser};
+use pomkit_core::params;
 use pomkit_core::trace::{
-    MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MAX_SAMPLES, MIN_PERSPECTIVE_BIAS, Technique, TraceParamError, TraceParams,
+    MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MIN_PERSPECTIVE_BIAS, Technique, TraceParamError, TraceParams,
 };
 
 use crate::bake::EdgesArg;
 
 /// Options of the tracing techniques. Each applies to the techniques named in its help and is
-/// ignored by the others.
+/// ignored by the others. Defaults and help come from the parameter table
+/// (`pomkit_core::params`), as scene files' keys do.
 #[derive(Args, Debug, Clone)]
 #[command(next_help_heading = "Technique options")]
 pub struct TechniqueArgs {
-    /// pom: fewest samples, taken head-on (1 to 1024; others are clamped). Fewer samples are
-    /// cheaper but miss thin features and stair-step.
-    #[arg(long, default_value_t = 8, value_name = "N")]
+    // Bevy calls it parallax_depth_scale.
+    #[arg(
+        long,
+        default_value_t = params::DEPTH_SCALE.default.f32(),
+        help = params::DEPTH_SCALE.help(),
+        allow_negative_numbers = true,
+        value_name = "S"
+    )]
+    pub depth_scale: f32,
+    #[arg(long, default_value_t = params::MIN_SAMPLES.default.u32(), help = params::MIN_SAMPLES.help(), value_name = "N")]
     pub min_samples: u32,
-    /// pom: most samples, taken at grazing angles (1 to 1024; others are clamped). At most
-    /// N + 1 + refine fetches per ray.
-    #[arg(long, default_value_t = 32, value_name = "N")]
+    #[arg(long, default_value_t = params::MAX_SAMPLES_PARAM.default.u32(), help = params::MAX_SAMPLES_PARAM.help(), value_name = "N")]
     pub max_samples: u32,
-    /// steep and relief: depth planes of the linear search (1 to 1024; others are clamped). At
-    /// most N fetches, plus relief's binary steps. Fewer planes cost less and stair-step more.
-    #[arg(long, default_value_t = 32, value_name = "N")]
+    #[arg(long, default_value_t = params::SAMPLES_PARAM.default.u32(), help = params::SAMPLES_PARAM.help(), value_name = "N")]
     pub samples: u32,
-    /// iterative: parallax steps k (1 to 1024; others are clamped), k fetches. More steps settle
-    /// better on slopes; no occlusion at any k.
-    #[arg(long, default_value_t = 4, value_name = "K")]
+    #[arg(long, default_value_t = params::ITERATIONS.default.u32(), help = params::ITERATIONS.help(), value_name = "K")]
     pub iterations: u32,
-    /// relief and cone: binary refinement steps after the linear search (relief) or a relaxed
-    /// cone step (cone), one fetch each, at most 64.
-    #[arg(long, default_value_t = 6, value_name = "K")]
+    #[arg(long, default_value_t = params::BINARY_STEPS.default.u32(), help = params::BINARY_STEPS.help(), value_name = "K")]
     pub binary_steps: u32,
-    /// pom: secant refinement steps after the linear search (one fetch each, at most 64).
-    #[arg(long, default_value_t = 0, value_name = "K")]
+    #[arg(long, default_value_t = params::REFINE.default.u32(), help = params::REFINE.help(), value_name = "K")]
     pub refine: u32,
-    /// pom-classic: Brawley's perspective bias, 0 to 1. 1 gives the exact parallax length;
-    /// smaller values shorten the trace toward grazing angles (less shimmer, flatter relief).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_name = "B")]
+    #[arg(
+        long,
+        default_value_t = params::PERSPECTIVE_BIAS.default.f32(),
+        help = params::PERSPECTIVE_BIAS.help(),
+        allow_negative_numbers = true,
+        value_name = "B"
+    )]
     pub perspective_bias: f32,
-    /// Height map borders: wrap (tiling textures) or clamp.
-    #[arg(long, value_enum, default_value_t = EdgesArg::Wrap)]
+    #[arg(long, value_enum, default_value_t = EdgesArg::Wrap, help = params::EDGES.help())]
     pub edges: EdgesArg,
 }
 
 impl TechniqueArgs {
-    /// The trace parameters these options and `depth_scale` (from `--depth-scale`) give,
-    /// checked; errors name the flag at fault.
-    pub fn params(&self, depth_scale: f32) -> Result<TraceParams> {
+    /// The trace parameters these options give, checked; errors name the flag at fault.
+    pub fn params(&self) -> Result<TraceParams> {
         let params = TraceParams {
-            depth_scale,
+            depth_scale: self.depth_scale,
             min_samples: self.min_samples,
             max_samples: self.max_samples,
             samples: self.samples,
@@ -117,9 +119,39 @@ pub fn parse_list(s: &str) -> Result<Vec<Technique>> {
     Ok(list)
 }
 
-// The help above quotes the clamp and the bias range: keep them true.
-const _: () = assert!(MAX_SAMPLES == 1024, "update the sample-count clamp quoted in TechniqueArgs' help");
-const _: () = assert!(
-    MIN_PERSPECTIVE_BIAS == 0.0 && MAX_PERSPECTIVE_BIAS == 1.0,
-    "update the perspective-bias range quoted in TechniqueArgs' help"
-);
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+    use pomkit_core::params::{self, Value};
+
+    /// Every flag of `trace` and `compare` that sets a material parameter is in the parameter
+    /// table with the table's default, and every table parameter with a flag has it.
+    #[test]
+    fn the_flags_are_the_parameter_tables() {
+        let cli = crate::Cli::command();
+        for verb in ["trace", "compare"] {
+            let cmd = cli.find_subcommand(verb).unwrap();
+            for p in params::all() {
+                let Some(flag) = p.flag else { continue };
+                let arg = cmd
+                    .get_arguments()
+                    .find(|a| a.get_long() == flag.strip_prefix("--"))
+                    .unwrap_or_else(|| panic!("{verb} has no {flag} ({})", p.key));
+                let default = arg.get_default_values().first().and_then(|d| d.to_str()).unwrap_or_default();
+                let same = match p.default {
+                    Value::Float(x) => default.parse::<f64>().is_ok_and(|d| (d - x).abs() < 1e-6),
+                    Value::Int(n) => default.parse::<i64>() == Ok(n),
+                    Value::Name(name) => default == name,
+                    other => panic!("{}: a flag for {other:?}", p.key),
+                };
+                assert!(same, "{verb} {flag}: default {default:?}, the table's {:?}", p.default);
+            }
+            // The other way: technique options not in the table would be a second source.
+            let table: Vec<&str> = params::all().filter_map(|p| p.flag?.strip_prefix("--")).collect();
+            for arg in cmd.get_arguments().filter(|a| a.get_help_heading() == Some("Technique options")) {
+                let long = arg.get_long().unwrap_or_default();
+                assert!(table.contains(&long), "{verb} --{long} is a technique option missing from the table");
+            }
+        }
+    }
+}

@@ -51,10 +51,6 @@ Write errors, a full disk or standard output included, fail the run.")]
 pub struct TraceArgs {
     #[command(flatten)]
     height: HeightOption,
-    /// How far below the surface, in UV units, the deepest point lies (Bevy's
-    /// parallax_depth_scale). Larger values give deeper relief and longer, costlier traces.
-    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true, value_name = "S")]
-    depth_scale: f32,
     /// Tracing technique.
     #[arg(long, value_parser = technique_parser(), value_name = "T")]
     technique: Technique,
@@ -69,7 +65,7 @@ pub struct TraceArgs {
 }
 
 pub fn run(a: &TraceArgs) -> Result<()> {
-    let params = a.options.params(a.depth_scale)?;
+    let params = a.options.params()?;
     // Every output is checked before any work, and never one of the inputs.
     let mut outs = Outputs::new();
     outs.input(&a.rays);

@@ -76,7 +76,7 @@ fn is_root() -> bool {
     String::from_utf8_lossy(&out.stdout).trim() == "0"
 }
 
-/// The folder: three good maps at the top (different sizes and kinds, one 16-bit, one
+/// A texture library of the kind batch baking meets: three good maps at the top (different sizes and kinds, one 16-bit, one
 /// with an upper-case extension), one in a subfolder, things a folder walk must ignore (a
 /// hidden image, a text file) and bad entries (a truncated PNG, a folder named `dir.png`, a
 /// dangling link, a FIFO and, when not root, a file nobody may read). Returns the names of the

@@ -13,11 +13,11 @@
 
 use std::path::Path;
 
+use pomkit_core::compose::{self, Image};
 use pomkit_core::render::{Mode, RenderOptions, RenderOutput};
 use pomkit_core::scene::Scene;
 use pomkit_core::trace::Technique;
 use pomkit_cpu::CpuRenderer;
-use pomkit_cpu::compose::{self, Image};
 
 /// `examples/scenes/fur.toml` with its built-in maps at `size` x `size` texels instead of
 /// 512 x 512 (the displaced truth tessellates to texels: small maps keep it quick).
@@ -34,7 +34,7 @@ fn render(scene: &Scene, opts: &RenderOptions) -> RenderOutput {
 }
 
 fn image(out: &RenderOutput) -> Image {
-    Image { width: out.width, height: out.height, pixels: out.to_srgb8() }
+    Image::from(out)
 }
 
 /// PSNR in dB of `out` against `truth`, over the whole frame, as `pomkit render --compare`.

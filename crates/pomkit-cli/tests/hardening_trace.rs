@@ -57,7 +57,7 @@ fn trace_rays(dir: &Path, rays: &str, args: &[&str]) -> Vec<HitLine> {
 
 #[test]
 fn exact_with_huge_uvs_and_wrapping_edges_finishes_with_the_first_tiles_hit() {
-    // The repro spun forever (u >= 3e14). f32(1e15) = 999999986991104 and f32(3e14) are
+    // A reported hang: exact spun forever here (u >= 3e14). f32(1e15) = 999999986991104 and f32(3e14) are
     // whole numbers of tiles, so with wrapping edges the truth is the same ray entering at u = 0
     // (a tile away from any f32 rounding): same depth, same v, same fetches, and the hit's u is
     // the entry's, to the f32 spacing there (2^26 at 1e15).

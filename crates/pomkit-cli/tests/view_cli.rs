@@ -164,14 +164,7 @@ fn exported_scene_renders_the_viewers_picture() {
         assert!(out.status.success(), "render --backend {backend} failed:\n{}", stderr(&out));
         let rendered = image::open(&out_png).unwrap().to_rgb8();
         assert_eq!(rendered.dimensions(), viewer.dimensions());
-        let mse = rendered
-            .as_raw()
-            .iter()
-            .zip(viewer.as_raw())
-            .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
-            .sum::<f64>()
-            / rendered.as_raw().len() as f64;
-        let psnr = if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 / mse).log10() };
+        let psnr = pomkit_core::compose::psnr(rendered.as_raw(), viewer.as_raw(), 255.0);
         assert!(
             psnr >= min_db,
             "{backend}: exported scene renders at {psnr:.1} dB from the viewer's view (< {min_db})"

@@ -22,6 +22,24 @@ pub enum EdgeMode {
 }
 
 impl EdgeMode {
+    /// Both modes.
+    pub const ALL: [EdgeMode; 2] = [EdgeMode::Wrap, EdgeMode::Clamp];
+
+    /// The name scene files and the command line use.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            EdgeMode::Wrap => "wrap",
+            EdgeMode::Clamp => "clamp",
+        }
+    }
+
+    /// The mode named `name` (case-insensitive), if any.
+    #[must_use]
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|e| e.name().eq_ignore_ascii_case(name))
+    }
+
     /// Maps an integer texel coordinate into `0..size` by wrapping or clamping.
     ///
     /// # Panics

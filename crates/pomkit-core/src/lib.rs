@@ -33,11 +33,13 @@
 
 pub mod accuracy;
 pub mod bake;
+pub mod compose;
 pub mod cone;
 pub mod demo;
 pub mod heightfield;
 pub mod memory;
 pub mod mesh;
+pub mod params;
 pub mod procedural;
 pub mod pyramid;
 pub mod render;

@@ -34,7 +34,7 @@ pub struct RenderOptions {
     /// Also produce the AOVs (hit UV, depth, shadow, fetches, LOD).
     pub aovs: bool,
     /// `displaced` mode: largest triangle edge in texels of the height map (1 = the height
-    /// map's resolution, as the ground truth asks).
+    /// map's resolution, the ground truth of docs/ACCURACY.md).
     pub displaced_edge_texels: f32,
     /// Debug view of the LOD system (Tatarchuk 2006 figure 12): tint pixels green where the
     /// full technique runs, red where only normal mapping does, blended across the fade.

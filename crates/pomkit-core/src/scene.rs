@@ -456,22 +456,36 @@ pub struct Material {
     pub cones: Option<Arc<crate::cone::ConeMap>>,
 }
 
+/// The material defaults that are not trace or shadow parameters, from the parameter table
+/// (evaluated when building).
+mod defaults {
+    use crate::params as p;
+    pub const BASE_COLOR: [f32; 3] = p::BASE_COLOR.default.color();
+    pub const LOD_THRESHOLD: f32 = p::LOD_THRESHOLD.default.f32();
+    pub const SPECULAR: f32 = p::SPECULAR.default.f32();
+    pub const SHININESS: f32 = p::SHININESS.default.f32();
+    pub const PIXEL_DEPTH_OFFSET: bool = p::PIXEL_DEPTH_OFFSET.default.bool();
+    pub const SILHOUETTE: bool = p::SILHOUETTE.default.bool();
+}
+
 impl Default for Material {
+    /// The defaults of the parameter table ([`crate::params`]).
     fn default() -> Self {
+        use defaults as p;
         Self {
             name: "default".to_owned(),
             albedo: None,
-            base_color: Vec3::splat(0.8),
+            base_color: Vec3::from_array(p::BASE_COLOR),
             normal_map: None,
             height: None,
             technique: Technique::Pom,
             trace: TraceParams::default(),
             shadow: ShadowParams::default(),
-            lod_threshold: 4.0,
-            specular: 0.25,
-            shininess: 32.0,
-            pixel_depth_offset: true,
-            silhouette: false,
+            lod_threshold: p::LOD_THRESHOLD,
+            specular: p::SPECULAR,
+            shininess: p::SHININESS,
+            pixel_depth_offset: p::PIXEL_DEPTH_OFFSET,
+            silhouette: p::SILHOUETTE,
             cones: None,
         }
     }

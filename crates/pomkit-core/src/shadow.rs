@@ -97,9 +97,14 @@ pub struct ShadowParams {
     pub softness: f32,
 }
 
+impl ShadowParams {
+    /// The defaults, from the parameter table ([`crate::params`]; evaluated when building).
+    pub const DEFAULT: Self = Self { mode: ShadowMode::None, softness: crate::params::SOFTNESS.default.f32() };
+}
+
 impl Default for ShadowParams {
     fn default() -> Self {
-        Self { mode: ShadowMode::None, softness: 0.1 }
+        Self::DEFAULT
     }
 }
 

@@ -18,7 +18,7 @@
 //! # Methods
 //!
 //! [`TangentMethod::MikkTSpace`] (the default) runs Morten Mikkelsen's algorithm through the
-//! `mikktspace` crate: it is what Blender, Substance and the glTF sample models bake against,
+//! `bevy_mikktspace` crate: it is what Blender, Substance and the glTF sample models bake against,
 //! so normal maps made by those tools shade without seams. [`TangentMethod::Lengyel`] is the
 //! method of Lengyel, *Foundations of Game Engine Development, Vol. 2: Rendering*, section 7.5:
 //! per-triangle tangent and bitangent from eq. 7.37, summed per vertex, then Gram-Schmidt
@@ -472,7 +472,7 @@ struct SignedSums {
     negative_count: u32,
 }
 
-/// `mikktspace::Geometry` over the validated slices. Positions and UVs are scaled by powers of
+/// `bevy_mikktspace::Geometry` over the validated slices. Positions and UVs are scaled by powers of
 /// two (exact, and tangent directions, handedness and vertex identity do not change under
 /// uniform scaling) so that MikkTSpace's `f32` arithmetic neither overflows on huge meshes nor
 /// treats tiny ones as degenerate.
@@ -489,7 +489,7 @@ impl MikkAdapter<'_> {
     }
 }
 
-impl mikktspace::Geometry for MikkAdapter<'_> {
+impl bevy_mikktspace::Geometry for MikkAdapter<'_> {
     fn num_faces(&self) -> usize {
         self.mesh.indices.len() / 3
     }
@@ -515,7 +515,17 @@ impl mikktspace::Geometry for MikkAdapter<'_> {
             .map_or([0.0; 2], |uv| [uv.x * self.uv_scale, (1.0 - uv.y) * self.uv_scale])
     }
 
-    fn set_tangent_encoded(&mut self, tangent: [f32; 4], face: usize, vert: usize) {
+    fn set_tangent(&mut self, tangent_space: Option<bevy_mikktspace::TangentSpace>, face: usize, vert: usize) {
+        // No tangent space for this corner (a degenerate face with no neighbour to borrow
+        // from): the vertex's other corners, or the fallback, decide.
+        let Some(ts) = tangent_space else { return };
+        self.add(ts.tangent_encoded(), face, vert);
+    }
+}
+
+impl MikkAdapter<'_> {
+    /// Adds one corner's tangent `(x, y, z, w)` to its vertex's sums.
+    fn add(&mut self, tangent: [f32; 4], face: usize, vert: usize) {
         let v = self.vertex(face, vert);
         let t = Vec3::new(tangent[0], tangent[1], tangent[2]);
         // MikkTSpace can emit zero tangents (on slivers); those are left to the fallback.
@@ -542,55 +552,53 @@ fn power_of_two_scale(max_abs: f32) -> f32 {
     f32::from_bits(((127 - e) as u32) << 23)
 }
 
-/// MikkTSpace tangents, or `None` when the mesh is too large for it or it failed.
+/// MikkTSpace tangents (bevy_mikktspace), or `None` when the mesh is too large for it or it
+/// failed.
 fn mikktspace_tangents(mesh: &Mesh<'_>) -> Option<Vec<Vec4>> {
-    use mikktspace::Geometry as _;
+    let mut adapter = MikkAdapter::new(mesh)?;
+    // bevy_mikktspace is safe Rust and handles degenerate meshes (every triangle with two
+    // equal positions included, where the C port it replaces read out of bounds). Should it
+    // panic all the same, fall back to Lengyel rather than take the caller down.
+    catch_unwind(AssertUnwindSafe(|| bevy_mikktspace::generate_tangents(&mut adapter))).ok()?.ok()?;
+    Some(adapter.resolve())
+}
 
-    // mikktspace stores `face << 2 | corner` in an i32.
-    if mesh.indices.len() / 3 > (i32::MAX >> 2) as usize {
-        return None;
-    }
-    let max_position = mesh.positions.iter().fold(0.0f32, |m, p| m.max(p.abs().max_element()));
-    let max_uv = mesh.uvs.iter().fold(0.0f32, |m, uv| m.max(uv.x.abs()).max((1.0 - uv.y).abs()));
-    let mut adapter = MikkAdapter {
-        mesh,
-        position_scale: power_of_two_scale(max_position),
-        uv_scale: power_of_two_scale(max_uv),
-        sums: vec![SignedSums::default(); mesh.positions.len()],
-    };
-    // mikktspace 0.3 computes `non_degenerate_count - 1` in usize (an overflow panic in debug
-    // builds, out-of-bounds reads in release; bevy issues 8429 and 14874) when every triangle
-    // has two equal positions, by its own test (exact equality). Such a mesh has no tangents to
-    // compute: every vertex takes the fallback.
-    let any_usable = (0..adapter.num_faces()).any(|f| {
-        let [p0, p1, p2] = [0, 1, 2].map(|k| Vec3::from(adapter.position(f, k)));
-        p0 != p1 && p0 != p2 && p1 != p2
-    });
-    if any_usable {
-        // The transpiled C is not known to panic once the case above is excluded; should it,
-        // fall back to Lengyel rather than take the caller down.
-        let ok = catch_unwind(AssertUnwindSafe(|| mikktspace::generate_tangents(&mut adapter))).ok()?;
-        if !ok {
+impl<'a> MikkAdapter<'a> {
+    /// The adapter, with its power-of-two scales; `None` when the mesh has too many triangles
+    /// for MikkTSpace, which stores `face << 2 | corner` in an i32.
+    fn new(mesh: &'a Mesh<'a>) -> Option<Self> {
+        if mesh.indices.len() / 3 > (i32::MAX >> 2) as usize {
             return None;
         }
-    }
-    let tangents = adapter
-        .sums
-        .iter()
-        .zip(mesh.normals)
-        .map(|(s, &n)| {
-            let positive = (s.positive.as_dvec3(), 1.0);
-            let negative = (s.negative.as_dvec3(), -1.0);
-            let preferred =
-                if s.negative_count > s.positive_count { [negative, positive] } else { [positive, negative] };
-            let n64 = n.as_dvec3();
-            preferred
-                .into_iter()
-                .find_map(|(t, w)| reject_normalize(t, n64).map(|t| finish(Some(t), w, n)))
-                .unwrap_or_else(|| finish(None, 1.0, n))
+        let max_position = mesh.positions.iter().fold(0.0f32, |m, p| m.max(p.abs().max_element()));
+        let max_uv = mesh.uvs.iter().fold(0.0f32, |m, uv| m.max(uv.x.abs()).max((1.0 - uv.y).abs()));
+        Some(MikkAdapter {
+            mesh,
+            position_scale: power_of_two_scale(max_position),
+            uv_scale: power_of_two_scale(max_uv),
+            sums: vec![SignedSums::default(); mesh.positions.len()],
         })
-        .collect();
-    Some(tangents)
+    }
+
+    /// Each vertex's tangent from its corners' sums: the handedness most corners have (their
+    /// mean direction made perpendicular to the normal), else the other, else the fallback.
+    fn resolve(&self) -> Vec<Vec4> {
+        self.sums
+            .iter()
+            .zip(self.mesh.normals)
+            .map(|(s, &n)| {
+                let positive = (s.positive.as_dvec3(), 1.0);
+                let negative = (s.negative.as_dvec3(), -1.0);
+                let preferred =
+                    if s.negative_count > s.positive_count { [negative, positive] } else { [positive, negative] };
+                let n64 = n.as_dvec3();
+                preferred
+                    .into_iter()
+                    .find_map(|(t, w)| reject_normalize(t, n64).map(|t| finish(Some(t), w, n)))
+                    .unwrap_or_else(|| finish(None, 1.0, n))
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]
@@ -1017,7 +1025,7 @@ mod tests {
         let t = compute_tangents(&p, &n, &uv, &[0, 1, 2], &TangentOptions::default()).unwrap();
         // The normals fall back to +Z (no area), the tangents to a vector perpendicular to it.
         assert_valid(&t, &[Vec3::Z; 3]);
-        // ... and that without mikktspace panicking (a caught panic would give `None`).
+        // ... and that without bevy_mikktspace panicking (a caught panic would give `None`).
         let unit = unit_normals(&p, &n, &[0, 1, 2]);
         let mesh = Mesh { positions: &p, normals: &unit, uvs: &uv, indices: &[0, 1, 2] };
         assert!(mikktspace_tangents(&mesh).is_some());
@@ -1200,6 +1208,76 @@ mod tests {
             let normals = compute_vertex_normals(&p, &idx).unwrap();
             for m in normals {
                 prop_assert!(m.is_finite() && (m.length() - 1.0).abs() < 1e-4);
+            }
+        }
+    }
+
+    impl mikktspace::Geometry for MikkAdapter<'_> {
+        fn num_faces(&self) -> usize {
+            bevy_mikktspace::Geometry::num_faces(self)
+        }
+        fn num_vertices_of_face(&self, face: usize) -> usize {
+            bevy_mikktspace::Geometry::num_vertices_of_face(self, face)
+        }
+        fn position(&self, face: usize, vert: usize) -> [f32; 3] {
+            bevy_mikktspace::Geometry::position(self, face, vert)
+        }
+        fn normal(&self, face: usize, vert: usize) -> [f32; 3] {
+            bevy_mikktspace::Geometry::normal(self, face, vert)
+        }
+        fn tex_coord(&self, face: usize, vert: usize) -> [f32; 2] {
+            bevy_mikktspace::Geometry::tex_coord(self, face, vert)
+        }
+        fn set_tangent_encoded(&mut self, tangent: [f32; 4], face: usize, vert: usize) {
+            self.add(tangent, face, vert);
+        }
+    }
+
+    /// The tangents of the `mikktspace` 0.3 crate pomkit used before `bevy_mikktspace`, through
+    /// the same adapter and resolution.
+    fn old_mikktspace_tangents(mesh: &Mesh<'_>) -> Vec<Vec4> {
+        let mut adapter = MikkAdapter::new(mesh).unwrap();
+        assert!(mikktspace::generate_tangents(&mut adapter));
+        adapter.resolve()
+    }
+
+    /// bevy_mikktspace gives the tangents mikktspace 0.3 gave, on the built-in shapes (poles,
+    /// seams, caps, mirrored and rotated UVs) and on randomly perturbed grids.
+    #[test]
+    fn bevy_mikktspace_agrees_with_the_tangents_before_it() {
+        use crate::mesh::Mesh as Shape;
+        let mut meshes = vec![
+            Shape::uv_sphere(1.0, 12, 24),
+            Shape::torus(1.0, 0.3, 24, 12),
+            Shape::cylinder(0.5, 2.0, 16),
+            Shape::cube(2.0),
+            Shape::disc(1.0, 16),
+            Shape::plane(Vec2::new(2.0, 3.0), 4),
+        ];
+        // Grids with jittered positions and UVs, some mirrored in u.
+        for seed in 0..6u32 {
+            let mut m = Shape::plane(Vec2::splat(2.0), 6);
+            for (k, (p, uv)) in m.positions.iter_mut().zip(&mut m.uvs).enumerate() {
+                let h = |i: u32| {
+                    ((k as u32).wrapping_mul(2_654_435_761).wrapping_add(seed * 97 + i) % 1000) as f32 / 1000.0
+                };
+                p.y += 0.3 * (h(1) - 0.5);
+                *uv += Vec2::new(h(2) - 0.5, h(3) - 0.5) * 0.04;
+                if seed % 2 == 1 {
+                    uv.x = 1.0 - uv.x;
+                }
+            }
+            meshes.push(m);
+        }
+        for (i, m) in meshes.iter().enumerate() {
+            let unit = unit_normals(&m.positions, &m.normals, &m.indices);
+            let mesh = Mesh { positions: &m.positions, normals: &unit, uvs: &m.uvs, indices: &m.indices };
+            let new = mikktspace_tangents(&mesh).unwrap();
+            let old = old_mikktspace_tangents(&mesh);
+            for (k, (a, b)) in new.iter().zip(&old).enumerate() {
+                assert_eq!(a.w, b.w, "mesh {i} vertex {k}: handedness {a} against {b}");
+                let angle = a.truncate().angle_between(b.truncate()).to_degrees();
+                assert!(angle < 0.01, "mesh {i} vertex {k}: {angle} degrees apart ({a} against {b})");
             }
         }
     }

@@ -378,14 +378,14 @@ fn one_sample_techniques_are_continuous_at_normal_incidence() {
 
 // ---- hardening: huge UVs, any direction length, bounded parameters, bounded loops ----
 
-/// The cobblestones of the repro: `builtin:cobblestones:64x64`.
+/// The cobblestones of a reported hang's repro: `builtin:cobblestones:64x64`.
 fn cobblestones() -> HeightField {
     generate(Pattern::Cobblestones, N, N)
 }
 
 #[test]
 fn huge_uvs_with_wrapping_edges_trace_as_the_same_ray_in_the_first_tile() {
-    // The ray: u = 1e15 spun forever in `exact`. f32(1e15) = 999999986991104 is a whole
+    // The reported ray: u = 1e15 spun forever in `exact`. f32(1e15) = 999999986991104 is a whole
     // number of tiles (f32 spacing there is 2^26), so with wrapping edges the ray meets the
     // surface exactly as the same ray entering at u = 0 does: the independent truth is the
     // brute-force search on that ray, and the hit's u is the entry's, to f32 precision.
@@ -475,7 +475,7 @@ fn direction_length_does_not_matter() {
             }
         }
     }
-    // The literal directions.
+    // The reported directions, as written.
     for dir in [Vec3::new(1e20, 1e20, -1e20), Vec3::new(1e-30, 1e-30, -1e-30)] {
         let got = trace(&s, &Ray::new(uv, dir), Technique::Exact, &p);
         let want = trace(&s, &Ray::new(uv, Vec3::new(1.0, 1.0, -1.0)), Technique::Exact, &p);

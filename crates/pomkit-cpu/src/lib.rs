@@ -22,7 +22,6 @@
 //! # Ok::<(), pomkit_cpu::RenderError>(())
 //! ```
 
-pub mod compose;
 pub mod raster;
 
 use std::sync::Arc;

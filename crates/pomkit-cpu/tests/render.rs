@@ -3,6 +3,7 @@
 
 use std::sync::Arc;
 
+use pomkit_core::compose::{Image, difference};
 use pomkit_core::glam::{Mat4, Vec2, Vec3};
 use pomkit_core::mesh::Mesh;
 use pomkit_core::procedural::{Pattern, generate};
@@ -10,7 +11,6 @@ use pomkit_core::scene::{Camera, Light, Material, Object, Scene};
 use pomkit_core::shadow::{ShadowMode, ShadowParams};
 use pomkit_core::trace::{Technique, TraceParams};
 use pomkit_core::{EdgeMode, HeightField};
-use pomkit_cpu::compose::{Image, difference};
 use pomkit_cpu::{CpuRenderer, Mode, RenderOptions, RenderOutput};
 
 const W: u32 = 160;
@@ -195,7 +195,7 @@ fn plane_at(angle: f32, technique: Technique) -> (Scene, Camera) {
 }
 
 fn image(out: &RenderOutput) -> Image {
-    Image { width: out.width, height: out.height, pixels: out.to_srgb8() }
+    Image::from(out)
 }
 
 #[test]

@@ -12,6 +12,7 @@
 
 use std::sync::{Arc, Mutex, OnceLock};
 
+use pomkit_core::compose::{Image, difference};
 use pomkit_core::glam::{Mat4, Vec2, Vec3};
 use pomkit_core::mesh::Mesh;
 use pomkit_core::render::{Mode, RenderOptions, RenderOutput};
@@ -50,21 +51,11 @@ fn render_cpu(scene: &Scene, opts: &RenderOptions) -> RenderOutput {
 
 /// PSNR (dB) over all pixels, and the share of covered pixels with a channel off by more than 20.
 fn compare(gpu: &RenderOutput, cpu: &RenderOutput) -> (f64, f64) {
-    let (a, b) = (gpu.to_srgb8(), cpu.to_srgb8());
-    let mut se = 0.0f64;
-    let mut over = 0usize;
-    for (p, q) in a.iter().zip(&b) {
-        let mut worst = 0;
-        for k in 0..3 {
-            let d = i32::from(p[k]) - i32::from(q[k]);
-            se += f64::from(d * d);
-            worst = worst.max(d.abs());
-        }
-        over += usize::from(worst > 20);
-    }
-    let mse = se / (a.len() * 3) as f64;
-    let psnr = if mse == 0.0 { 99.0 } else { 10.0 * (255.0 * 255.0 / mse).log10() };
-    (psnr, over as f64 / cpu.covered.max(1) as f64)
+    let (a, b) = (Image::from(gpu), Image::from(cpu));
+    let d = difference(&a, &b, 20, None);
+    // `difference` counts the share over all pixels; the tolerance is stated per covered pixel.
+    let over = d.share_over * a.pixels.len() as f64;
+    (d.psnr_db, over / cpu.covered.max(1) as f64)
 }
 
 fn assert_agree(gpu: &RenderOutput, cpu: &RenderOutput, what: &str) {

@@ -51,6 +51,19 @@ fn uniform_layouts_match_the_wgsl_structs() {
     assert_eq!(params.to_bytes().len(), pomkit_gpu::library::PomkitParams::SIZE as usize);
 }
 
+/// The library's `PomkitParams` carries exactly the parameter table's uniform members
+/// (`pomkit_core::params`, `Param::uniform`), besides padding.
+#[test]
+fn the_uniform_carries_the_parameter_tables_members() {
+    let library = parse(pomkit_gpu::library::WGSL);
+    let mut wgsl: Vec<String> =
+        wgsl_struct(&library, "PomkitParams").into_iter().map(|(n, _)| n).filter(|n| !n.starts_with("pad")).collect();
+    let mut table: Vec<String> = pomkit_core::params::all().filter_map(|p| p.uniform).map(str::to_owned).collect();
+    wgsl.sort();
+    table.sort();
+    assert_eq!(wgsl, table, "PomkitParams (left) and the parameter table's uniform members (right) disagree");
+}
+
 fn constant(module: &naga::Module, name: &str) -> naga::Literal {
     let (_, c) = module
         .constants

@@ -216,11 +216,10 @@ fn new_material(g: &Gpu, m: &Material) -> GpuMaterial {
     gm
 }
 
-/// PSNR (dB) of the colours as 8-bit sRGB-free values in [0, 1].
+/// PSNR (dB) of the colours clamped to [0, 1] (pomkit's one PSNR, `compose::psnr`).
 fn psnr(a: &[f32], b: &[f32]) -> f64 {
-    let mse = a.iter().zip(b).map(|(x, y)| f64::from(x.clamp(0.0, 1.0) - y.clamp(0.0, 1.0)).powi(2)).sum::<f64>()
-        / a.len() as f64;
-    if mse == 0.0 { f64::INFINITY } else { 10.0 * (1.0 / mse).log10() }
+    let unit = |c: &[f32]| c.iter().map(|x| x.clamp(0.0, 1.0)).collect::<Vec<f32>>();
+    pomkit_core::compose::psnr(&unit(a), &unit(b), 1.0)
 }
 
 fn covered(f: &Frame) -> Vec<bool> {

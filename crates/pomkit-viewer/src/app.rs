@@ -2,93 +2,23 @@
 //! the split view and overlays, files opened or dropped, export, persistence, screenshots.
 
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use eframe::egui::{self, Color32, ColorImage, Pos2, Rect, RichText, TextureHandle, TextureOptions, Ui, Vec2};
 use pomkit_core::glam::Vec3;
 use pomkit_core::procedural::Pattern;
 use pomkit_core::trace::Technique;
-use serde::{Deserialize, Serialize};
 use toml::Value;
 
 use crate::browser::{Browser, Purpose};
+use crate::camera::{self, Orbit};
 use crate::doc::{FileKind, MapSlot, SHAPES, SceneDoc};
 use crate::panel::{self, OTHER_PARAMS, TECHNIQUE_PARAMS};
+use crate::screenshot::Shot;
+pub use crate::screenshot::{ScreenshotJob, ScreenshotOutcome};
+pub use crate::settings::Settings;
+use crate::settings::{STORAGE_KEY, Saved};
 use crate::view::{Overlay, SideStats, ViewImage, ViewRequest, Worker, WorkerMessage, split_view};
-
-/// The view settings that are not part of the scene (saved between runs).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct Settings {
-    /// Split the view between the material's technique and another.
-    pub compare: bool,
-    /// The technique on the right of the split.
-    pub compare_technique: String,
-    /// Where the split is (share of the width).
-    pub split: f32,
-    /// The AOV overlay.
-    pub overlay: Overlay,
-    /// Its opacity.
-    pub overlay_opacity: f32,
-    /// Fetches drawn white in the heat map.
-    pub fetch_scale: f32,
-    /// Rendered pixels per screen pixel (lower is faster).
-    pub resolution: f32,
-    /// Where "Export" writes (the PNG; the TOML goes beside it).
-    pub export_path: String,
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Self {
-            compare: false,
-            compare_technique: "relief".into(),
-            split: 0.5,
-            overlay: Overlay::None,
-            overlay_opacity: 1.0,
-            fetch_scale: 48.0,
-            resolution: 1.0,
-            export_path: "pomkit-view.png".into(),
-        }
-    }
-}
-
-/// What is saved between runs.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-#[serde(default)]
-struct Saved {
-    scene: String,
-    material: usize,
-    object: usize,
-    settings: Settings,
-}
-
-const STORAGE_KEY: &str = "pomkit-viewer";
-
-/// Where screenshot mode leaves its result: the window's picture, or why there is none.
-pub type ScreenshotOutcome = Arc<Mutex<Option<Result<Arc<ColorImage>, String>>>>;
-
-/// A request to save the window to a PNG once the view is complete, then close.
-pub struct ScreenshotJob {
-    /// Where.
-    pub path: PathBuf,
-    /// What happened (read by `run` after the window closes): the window's picture, which
-    /// `run` writes to `path` only once the window has closed without error, or why not.
-    pub outcome: ScreenshotOutcome,
-    /// Give up after this long.
-    pub timeout: Duration,
-}
-
-#[derive(Default)]
-enum ShotState {
-    #[default]
-    Waiting,
-    /// Frames painted since the view completed.
-    Settling(u32),
-    Requested(Arc<Mutex<Option<Arc<ColorImage>>>>),
-    Done,
-}
 
 /// The viewer.
 pub struct ViewerApp {
@@ -109,7 +39,7 @@ pub struct ViewerApp {
     reload: bool,
     browser: Option<Browser>,
     slot_rects: Vec<(MapSlot, Rect)>,
-    shot: Option<(ScreenshotJob, ShotState, Instant)>,
+    shot: Option<Shot>,
     persist: bool,
 }
 
@@ -160,7 +90,7 @@ impl ViewerApp {
             reload: false,
             browser: None,
             slot_rects: Vec::new(),
-            shot: shot.map(|s| (s, ShotState::Waiting, Instant::now())),
+            shot: shot.map(Shot::new),
             persist,
         }
     }
@@ -365,7 +295,6 @@ impl ViewerApp {
                         }
                     }
                 }
-                panel::base_color_control(ui, &mut self.doc);
             });
             self.light_section(ui);
             self.view_section(ui);
@@ -411,8 +340,8 @@ impl ViewerApp {
                     self.sent = None;
                 }
             });
-            pick(ui, "Material", &self.doc.material_names(), &mut self.doc.material);
-            pick(ui, "Object", &self.doc.object_names(), &mut self.doc.object);
+            panel::pick(ui, "Material", &self.doc.material_names(), &mut self.doc.material);
+            panel::pick(ui, "Object", &self.doc.object_names(), &mut self.doc.object);
             let mesh = self.doc.mesh();
             let shown = if SHAPES.iter().any(|(s, _)| *s == mesh) {
                 mesh.clone()
@@ -557,7 +486,7 @@ impl ViewerApp {
             if self.settings.overlay == Overlay::Fetches {
                 ui.add(egui::Slider::new(&mut self.settings.fetch_scale, 1.0..=256.0).logarithmic(true).text("white at"))
                     .on_hover_text("The fetch count drawn white in the heat map.");
-                heat_legend(ui, self.settings.fetch_scale);
+                panel::heat_legend(ui, self.settings.fetch_scale);
             }
             ui.add(egui::Slider::new(&mut self.settings.resolution, 0.25..=1.0).text("resolution")).on_hover_text(
                 "Rendered pixels per screen pixel. Lower renders faster (while dragging, the view renders at half of this).",
@@ -637,18 +566,25 @@ impl ViewerApp {
             let delta = response.drag_delta();
             let (mods, secondary) = ui.input(|i| (i.modifiers, i.pointer.secondary_down() || i.pointer.middle_down()));
             if mods.ctrl || mods.command {
-                self.drag_light(delta);
+                let from = self.doc.light_direction().unwrap_or(Vec3::new(-0.5, 0.6, -0.4));
+                self.doc.set_light_direction(camera::drag_light(from, pomkit_core::glam::Vec2::new(delta.x, delta.y)));
             } else if secondary || mods.shift {
-                self.pan(delta, rect.height());
+                let mut c = self.camera();
+                c.pan(pomkit_core::glam::Vec2::new(delta.x, delta.y), rect.height());
+                self.set_camera(c);
             } else {
-                self.orbit(delta);
+                let mut c = self.camera();
+                c.orbit(pomkit_core::glam::Vec2::new(delta.x, delta.y));
+                self.set_camera(c);
             }
             interacting = true;
         }
         if response.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y + i.zoom_delta().ln() * 200.0);
             if scroll != 0.0 {
-                self.zoom((-scroll * 0.002).exp());
+                let mut c = self.camera();
+                c.zoom((-scroll * 0.002).exp());
+                self.set_camera(c);
                 interacting = true;
             }
         }
@@ -735,133 +671,15 @@ impl ViewerApp {
         }
     }
 
-    fn orbit(&mut self, delta: Vec2) {
+    /// The camera as the scene file holds it, for the orbit controls.
+    fn camera(&self) -> Orbit {
         let (eye, target) = self.doc.camera();
-        let offset = eye - target;
-        let r = offset.length().max(1e-3);
-        let yaw = offset.x.atan2(offset.z) - delta.x * 0.008;
-        let pitch = ((offset.y / r).clamp(-1.0, 1.0).asin() + delta.y * 0.008).clamp(-1.54, 1.54);
-        let dir = Vec3::new(pitch.cos() * yaw.sin(), pitch.sin(), pitch.cos() * yaw.cos());
-        self.doc.set_camera(target + dir * r, target);
+        Orbit { eye, target, fov_deg: self.doc.fov_deg() }
     }
 
-    fn pan(&mut self, delta: Vec2, view_height: f32) {
-        let (eye, target) = self.doc.camera();
-        let forward = (target - eye).normalize_or(Vec3::NEG_Z);
-        let right = forward.cross(Vec3::Y).normalize_or(Vec3::X);
-        let up = right.cross(forward);
-        // One view height of drag moves the target by the visible height at its distance.
-        let per_px = 2.0 * (eye - target).length() * (22.5f32.to_radians()).tan() / view_height.max(1.0);
-        let shift = (-right * delta.x + up * delta.y) * per_px;
-        self.doc.set_camera(eye + shift, target + shift);
+    fn set_camera(&mut self, c: Orbit) {
+        self.doc.set_camera(c.eye, c.target);
     }
-
-    fn zoom(&mut self, factor: f32) {
-        let (eye, target) = self.doc.camera();
-        let offset = eye - target;
-        let r = (offset.length() * factor).clamp(0.05, 200.0);
-        self.doc.set_camera(target + offset.normalize_or(Vec3::Z) * r, target);
-    }
-
-    fn drag_light(&mut self, delta: Vec2) {
-        let d = self.doc.light_direction().unwrap_or(Vec3::new(-0.5, 0.6, -0.4)).normalize_or(Vec3::Y);
-        let azimuth = d.x.atan2(d.z) + delta.x * 0.01;
-        let elevation = (d.y.clamp(-1.0, 1.0).asin() - delta.y * 0.01).clamp(2f32.to_radians(), 89.5f32.to_radians());
-        let dir = Vec3::new(elevation.cos() * azimuth.sin(), elevation.sin(), elevation.cos() * azimuth.cos());
-        self.doc.set_light_direction(dir);
-    }
-
-    fn screenshot_step(&mut self, ctx: &egui::Context) {
-        let complete = self.complete() || (self.error.is_some() && self.shown.is_some());
-        let Some((job, state, started)) = &mut self.shot else { return };
-        let finish = |job: &ScreenshotJob, r: Result<Arc<ColorImage>, String>| {
-            if let Ok(mut o) = job.outcome.lock() {
-                *o = Some(r);
-            }
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
-        };
-        if started.elapsed() > job.timeout && !matches!(state, ShotState::Done) {
-            finish(job, Err(format!("the view did not complete within {} s", job.timeout.as_secs())));
-            *state = ShotState::Done;
-            return;
-        }
-        match state {
-            ShotState::Waiting => {
-                if complete {
-                    *state = ShotState::Settling(0);
-                }
-                ctx.request_repaint();
-            }
-            ShotState::Settling(n) => {
-                // A couple of frames so the new texture is on screen.
-                if *n >= 2 {
-                    let slot: Arc<Mutex<Option<Arc<ColorImage>>>> = Arc::default();
-                    let sink = slot.clone();
-                    let wake = ctx.clone();
-                    ctx.request_screenshot(move |img| {
-                        if let Ok(mut s) = sink.lock() {
-                            *s = Some(img);
-                        }
-                        wake.request_repaint();
-                    });
-                    *state = ShotState::Requested(slot);
-                } else {
-                    *n += 1;
-                }
-                ctx.request_repaint();
-            }
-            ShotState::Requested(slot) => {
-                let img = slot.lock().ok().and_then(|mut s| s.take());
-                if let Some(img) = img {
-                    // Not written here: a run that fails afterwards must leave no file.
-                    let result = match &self.error {
-                        Some(e) => Err(format!("the view shows an error: {e}")),
-                        None => Ok(img),
-                    };
-                    finish(job, result);
-                    *state = ShotState::Done;
-                } else {
-                    ctx.request_repaint_after(Duration::from_millis(20));
-                }
-            }
-            ShotState::Done => {}
-        }
-    }
-}
-
-/// A combo box choosing one of `names` (shown only when there is a choice).
-fn pick(ui: &mut Ui, label: &str, names: &[String], index: &mut usize) {
-    if names.len() < 2 {
-        return;
-    }
-    let shown = &names[(*index).min(names.len() - 1)];
-    egui::ComboBox::from_label(label).selected_text(shown).show_ui(ui, |ui| {
-        for (i, n) in names.iter().enumerate() {
-            ui.selectable_value(index, i, n);
-        }
-    });
-}
-
-fn heat_legend(ui: &mut Ui, scale: f32) {
-    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width().min(220.0), 12.0), egui::Sense::hover());
-    let painter = ui.painter_at(rect);
-    let n = 32;
-    for i in 0..n {
-        let t = i as f32 / (n - 1) as f32;
-        let c = crate::view::heat(t);
-        let x0 = rect.left() + rect.width() * i as f32 / n as f32;
-        let x1 = rect.left() + rect.width() * (i + 1) as f32 / n as f32;
-        painter.rect_filled(
-            Rect::from_min_max(Pos2::new(x0, rect.top()), Pos2::new(x1, rect.bottom())),
-            0.0,
-            Color32::from_rgb(c[0], c[1], c[2]),
-        );
-    }
-    ui.horizontal(|ui| {
-        ui.small("0");
-        ui.add_space((ui.available_width() - 40.0).max(0.0));
-        ui.small(format!("{scale:.0}"));
-    });
 }
 
 impl eframe::App for ViewerApp {
@@ -910,7 +728,10 @@ impl eframe::App for ViewerApp {
         if ctx.input(|i| i.modifiers.command && i.key_pressed(egui::Key::Q)) {
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
         }
-        self.screenshot_step(&ctx);
+        let complete = self.complete() || (self.error.is_some() && self.shown.is_some());
+        if let Some(shot) = &mut self.shot {
+            shot.step(&ctx, complete, self.error.as_deref());
+        }
         if !self.complete() {
             ctx.request_repaint_after(Duration::from_millis(50));
         }

@@ -273,6 +273,15 @@ impl SceneDoc {
         (get("eye", Vec3::new(0.0, 2.0, 4.0)), get("target", Vec3::ZERO))
     }
 
+    /// The camera's vertical field of view in degrees (the loader's default when the file
+    /// leaves it out or holds something that is not a number).
+    #[must_use]
+    pub fn fov_deg(&self) -> f32 {
+        let fov = self.table.get("camera").and_then(Value::as_table).and_then(|c| c.get("fov"));
+        let fov = fov.and_then(|v| v.as_float().or_else(|| v.as_integer().map(|n| n as f64)));
+        fov.map_or(pomkit_core::scene::Camera::default().fov_y_deg, |f| f as f32)
+    }
+
     /// Moves the camera.
     pub fn set_camera(&mut self, eye: Vec3, target: Vec3) {
         let cam = self.table.entry("camera").or_insert_with(|| Value::Table(Table::new()));

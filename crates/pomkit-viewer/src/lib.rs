@@ -7,8 +7,11 @@
 
 pub mod app;
 pub mod browser;
+pub mod camera;
 pub mod doc;
 pub mod panel;
+mod screenshot;
+mod settings;
 pub mod view;
 
 use std::path::PathBuf;

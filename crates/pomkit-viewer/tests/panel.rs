@@ -205,7 +205,7 @@ fn tooltips_carry_the_docs() {
     label_node(&harness, "Iterations").hover();
     harness.run();
     assert!(tooltips_containing(&harness, "UV units").is_empty(), "the previous tooltip closed");
-    let shown = tooltips_containing(&harness, "parallax steps");
+    let shown = tooltips_containing(&harness, "Parallax steps");
     assert_eq!(shown.len(), 1, "hovering a disabled label shows its doc: {shown:?}");
     assert!(shown[0].contains("No effect now: used by iterative."), "{shown:?}");
 

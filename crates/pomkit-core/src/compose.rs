@@ -1,4 +1,8 @@
-//! Side-by-side comparison sheets with labels, and image-difference statistics.
+//! Side-by-side comparison sheets with labels, and image-difference statistics: the one PSNR
+//! of pomkit, which `pomkit render --compare`, the renderers' agreement tests and the viewer's
+//! export check all use.
+
+use crate::render::RenderOutput;
 
 /// An sRGB8 image.
 #[derive(Clone, Debug, PartialEq)]
@@ -9,6 +13,13 @@ pub struct Image {
     pub height: u32,
     /// Pixels, row-major.
     pub pixels: Vec<[u8; 3]>,
+}
+
+impl From<&RenderOutput> for Image {
+    /// The render as the PNG would store it ([`RenderOutput::to_srgb8`]).
+    fn from(out: &RenderOutput) -> Self {
+        Self { width: out.width, height: out.height, pixels: out.to_srgb8() }
+    }
 }
 
 impl Image {
@@ -116,7 +127,7 @@ pub fn difference(a: &Image, b: &Image, threshold: u8, mask: Option<&[bool]>) ->
         n += 1;
     }
     let mse = if n > 0 { se / (3 * n) as f64 } else { 0.0 };
-    let psnr_db = if mse > 0.0 { 10.0 * (255.0f64 * 255.0 / mse).log10() } else { f64::INFINITY };
+    let psnr_db = psnr_of_mse(mse, 255.0);
     Difference { psnr_db, share_over: if n > 0 { over as f64 / n as f64 } else { 0.0 }, threshold }
 }
 
@@ -174,6 +185,23 @@ fn glyph(c: char) -> [u8; 7] {
     }
 }
 
+/// Peak signal-to-noise ratio in dB of `a` against `b`, values whose full range is `peak` (255
+/// for 8-bit channels, 1 for colours in `[0, 1]`): `10 log10(peak^2 / MSE)`, infinite when the
+/// two are equal. Any channel layout: the slices are compared element by element.
+///
+/// # Panics
+/// If the lengths differ (a programming error).
+#[must_use]
+pub fn psnr<T: Copy + Into<f64>>(a: &[T], b: &[T], peak: f64) -> f64 {
+    assert_eq!(a.len(), b.len(), "PSNR of slices of different lengths");
+    let se: f64 = a.iter().zip(b).map(|(&x, &y)| (x.into() - y.into()).powi(2)).sum();
+    psnr_of_mse(if a.is_empty() { 0.0 } else { se / a.len() as f64 }, peak)
+}
+
+fn psnr_of_mse(mse: f64, peak: f64) -> f64 {
+    if mse > 0.0 { 10.0 * (peak * peak / mse).log10() } else { f64::INFINITY }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,6 +219,12 @@ mod tests {
         assert!((d.share_over - 1.0 / 16.0).abs() < 1e-12);
         let mask: Vec<bool> = (0..16).map(|i| i != 0).collect();
         assert!(difference(&a, &b, 8, Some(&mask)).psnr_db.is_infinite());
+        // The slice form agrees, on bytes and on unit floats.
+        let flat = |i: &Image| i.pixels.concat();
+        assert!((psnr(&flat(&a), &flat(&b), 255.0) - expect).abs() < 1e-9);
+        let unit = |i: &Image| i.pixels.concat().iter().map(|&c| f32::from(c) / 255.0).collect::<Vec<f32>>();
+        assert!((psnr(&unit(&a), &unit(&b), 1.0) - expect).abs() < 1e-4);
+        assert!(psnr::<u8>(&[], &[], 255.0).is_infinite());
     }
 
     #[test]
