@@ -4,7 +4,7 @@
 //! [`FILE_KEYS`]), is a row of this table: its key, type and range, default, a one-line doc and
 //! the techniques and shadow modes that use it. Everything else draws from it:
 //!
-//! - the defaults of [`TraceParams`], [`ShadowParams`](crate::shadow::ShadowParams) and
+//! - the defaults of [`TraceParams`](crate::trace::TraceParams), [`ShadowParams`](crate::shadow::ShadowParams) and
 //!   [`Material`](crate::scene::Material);
 //! - the command line's technique options (their defaults and help);
 //! - the viewer's panel (controls, slider ranges, tooltips, and whether a control applies);
@@ -13,6 +13,11 @@
 //!
 //! Tests in the crates that hold each of those fail when one disagrees with the table, so a
 //! parameter added in one place only does not go unnoticed.
+//!
+//! One name per parameter everywhere: the scene key, the `TraceParams` field, the uniform member
+//! and (with dashes) the flag. Some names are terse (`samples` counts depth planes, `refine`
+//! secant steps); they stay, since renaming them in the Rust API alone would give pomkit two
+//! vocabularies, and each row's doc says what it counts.
 
 use crate::shadow::ShadowMode;
 use crate::trace::{MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MAX_SAMPLES, MIN_PERSPECTIVE_BIAS, Technique};
