@@ -49,31 +49,28 @@ impl SlopeTable {
         let (cols, rows) = (w + 2 * pad, h + 2 * pad);
         // The gradient norm of a bilinear patch is largest at a corner: each component is
         // linear in one coordinate, so its square is convex, and so is their sum.
-        let base: Vec<f64> = (0..rows)
+        let gradient = |c: i64, r: i64| {
+            let (k, l) = (c - pad, r - pad);
+            let (d00, d10, d01, d11) =
+                (search.texel(k, l), search.texel(k + 1, l), search.texel(k, l + 1), search.texel(k + 1, l + 1));
+            let (gx0, gx1, gy0, gy1) = (d10 - d00, d11 - d01, d01 - d00, d11 - d10);
+            gx0.hypot(gy0).max(gx0.hypot(gy1)).max(gx1.hypot(gy0)).max(gx1.hypot(gy1))
+        };
+        // Two passes over the patches (the largest gradient, then each one quantized) rather
+        // than a table of f64 gradients beside the windows: the windows are then the build's
+        // whole extra memory, as `bytes` counts it.
+        let most = (0..rows)
             .into_par_iter()
-            .flat_map_iter(|r| {
-                (0..cols).map(move |c| {
-                    let (k, l) = (c - pad, r - pad);
-                    let (d00, d10, d01, d11) = (
-                        search.texel(k, l),
-                        search.texel(k + 1, l),
-                        search.texel(k, l + 1),
-                        search.texel(k + 1, l + 1),
-                    );
-                    let (gx0, gx1, gy0, gy1) = (d10 - d00, d11 - d01, d01 - d00, d11 - d10);
-                    gx0.hypot(gy0).max(gx0.hypot(gy1)).max(gx1.hypot(gy0)).max(gx1.hypot(gy1))
-                })
-            })
-            .collect();
-        let most = base.iter().copied().fold(0.0, f64::max);
+            .map(|r| (0..cols).map(|c| gradient(c, r)).fold(0.0, f64::max))
+            .reduce(|| 0.0, f64::max);
         // Headroom below u16::MAX, and one step more than the rounded-up quotient, keep every
         // stored value at or above the slope it stands for despite rounding.
         let unit = if most > 0.0 { most / 65_000.0 } else { 1.0 };
-        let mut windows = vec![u16::MAX; base.len() * LEVELS];
-        for (cell, &g) in base.iter().enumerate() {
-            windows[cell * LEVELS] = ((g / unit).ceil() + 1.0).min(65_535.0) as u16;
-        }
-        drop(base);
+        let mut windows = vec![u16::MAX; (cols * rows) as usize * LEVELS];
+        windows.par_chunks_mut(LEVELS).enumerate().for_each(|(cell, levels)| {
+            let (c, r) = (cell as i64 % cols, cell as i64 / cols);
+            levels[0] = ((gradient(c, r) / unit).ceil() + 1.0).min(65_535.0) as u16;
+        });
         for level in 1..LEVELS {
             let half = 1i64 << (level - 1);
             for r in 0..rows - half {
