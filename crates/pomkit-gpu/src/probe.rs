@@ -43,7 +43,7 @@ use wgpu::util::DeviceExt;
 
 use crate::height::HeightMaps;
 use crate::library::PomkitParams;
-use crate::util::texture_entry;
+use crate::util::{texture_entry, trilinear_sampler};
 use crate::{GpuContext, GpuError};
 
 /// Bytes of one `ProbeIn` record of `probe.wgsl` (two vec4).
@@ -198,25 +198,14 @@ impl RayProbe {
                 cache: None,
             })
         };
-        // Trilinear, as the material's sampler; the address mode is the edge mode's.
-        let sampler = |address: wgpu::AddressMode| {
-            device.create_sampler(&wgpu::SamplerDescriptor {
-                label: Some("pomkit ray probe"),
-                address_mode_u: address,
-                address_mode_v: address,
-                mag_filter: wgpu::FilterMode::Linear,
-                min_filter: wgpu::FilterMode::Linear,
-                mipmap_filter: wgpu::MipmapFilterMode::Linear,
-                ..Default::default()
-            })
-        };
         Self {
             trace: pipeline("trace_main"),
             curved: pipeline("curved_main"),
             shadow: pipeline("shadow_main"),
             layout,
-            repeat: sampler(wgpu::AddressMode::Repeat),
-            clamp: sampler(wgpu::AddressMode::ClampToEdge),
+            // Trilinear, as the material's sampler.
+            repeat: trilinear_sampler(device, EdgeMode::Wrap, "pomkit ray probe"),
+            clamp: trilinear_sampler(device, EdgeMode::Clamp, "pomkit ray probe"),
         }
     }
 

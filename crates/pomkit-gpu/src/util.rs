@@ -119,3 +119,22 @@ pub fn texture_entry(binding: u32, filterable: bool, visibility: wgpu::ShaderSta
         count: None,
     }
 }
+
+/// The sampler pomkit reads height maps and material textures with: trilinear, wrapping or
+/// clamping as `edges` says (the material's, the height resource's and the ray probe's).
+pub fn trilinear_sampler(device: &wgpu::Device, edges: pomkit_core::EdgeMode, label: &str) -> wgpu::Sampler {
+    let address = match edges {
+        pomkit_core::EdgeMode::Wrap => wgpu::AddressMode::Repeat,
+        pomkit_core::EdgeMode::Clamp => wgpu::AddressMode::ClampToEdge,
+    };
+    device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some(label),
+        address_mode_u: address,
+        address_mode_v: address,
+        address_mode_w: address,
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        mipmap_filter: wgpu::MipmapFilterMode::Linear,
+        ..Default::default()
+    })
+}

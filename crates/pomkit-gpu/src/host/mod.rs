@@ -72,7 +72,7 @@ use wgpu::util::DeviceExt;
 
 use crate::GpuError;
 use crate::height::{HeightMaps, HeightPassOptions, HeightPasses};
-use crate::util::{Std140, texture_entry};
+use crate::util::{Std140, texture_entry, trilinear_sampler};
 
 /// Side of the square compute workgroups in `import.wgsl`.
 mod import;
@@ -378,7 +378,7 @@ impl HeightResource {
         let (width, height) = (texture.width(), texture.height());
         guarded(device, label, || {
             let maps = HeightMaps::with_device(device, width, height, label).map_err(|e| gpu_error(e, label))?;
-            let sampler = sampler(device, opts.edges, label);
+            let sampler = trilinear_sampler(device, opts.edges, &format!("{label} heights"));
             let import = Import::new(device, texture, &maps, opts, label);
             let resource = Self { maps, sampler, opts: *opts, import: Some(import), label: label.to_owned() };
             resource.submit_rebuild(device, queue, passes);
@@ -407,7 +407,7 @@ impl HeightResource {
         check_size(device, width, height, label)?;
         guarded(device, label, || {
             let maps = HeightMaps::with_device(device, width, height, label).map_err(|e| gpu_error(e, label))?;
-            let sampler = sampler(device, opts.edges, label);
+            let sampler = trilinear_sampler(device, opts.edges, &format!("{label} heights"));
             let resource = Self { maps, sampler, opts: *opts, import: None, label: label.to_owned() };
             resource.maps.write_depths(queue, field.depths()).map_err(|e| gpu_error(e, label))?;
             resource.submit_rebuild(device, queue, passes);
@@ -616,24 +616,6 @@ fn check_size(device: &wgpu::Device, width: u32, height: u32, label: &str) -> Re
         });
     }
     Ok(())
-}
-
-/// A trilinear sampler with `edges`' address mode (as `GpuMaterial`'s).
-fn sampler(device: &wgpu::Device, edges: EdgeMode, label: &str) -> wgpu::Sampler {
-    let address = match edges {
-        EdgeMode::Wrap => wgpu::AddressMode::Repeat,
-        EdgeMode::Clamp => wgpu::AddressMode::ClampToEdge,
-    };
-    device.create_sampler(&wgpu::SamplerDescriptor {
-        label: Some(&format!("{label} heights")),
-        address_mode_u: address,
-        address_mode_v: address,
-        address_mode_w: address,
-        mag_filter: wgpu::FilterMode::Linear,
-        min_filter: wgpu::FilterMode::Linear,
-        mipmap_filter: wgpu::MipmapFilterMode::Linear,
-        ..Default::default()
-    })
 }
 
 /// [`HeightMaps::with_device`]'s error as a [`HostError`].

@@ -13,12 +13,12 @@ use pomkit_core::bake::NormalFilter;
 use pomkit_core::mesh::Mesh;
 use pomkit_core::scene::{Camera, Light, Material, NormalMap, Texture};
 use pomkit_core::trace::Technique;
-use pomkit_core::{EdgeMode, HeightField};
+use pomkit_core::HeightField;
 use wgpu::util::DeviceExt;
 
 use crate::height::{HeightMaps, HeightPassOptions, HeightPasses};
 use crate::host::HeightResource;
-use crate::util::{Std140, rgba16f_bytes, texture_entry};
+use crate::util::{Std140, rgba16f_bytes, texture_entry, trilinear_sampler};
 use crate::{GpuContext, GpuError};
 
 pub use crate::library::technique_index;
@@ -111,19 +111,7 @@ impl GpuMaterial {
         };
         let albedo_tex =
             texture_with_mips(ctx, "pomkit albedo", wgpu::TextureFormat::Rgba16Float, &rgba_levels(&albedo));
-        let address = match p.edges {
-            EdgeMode::Wrap => wgpu::AddressMode::Repeat,
-            EdgeMode::Clamp => wgpu::AddressMode::ClampToEdge,
-        };
-        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("pomkit material"),
-            address_mode_u: address,
-            address_mode_v: address,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            mipmap_filter: wgpu::MipmapFilterMode::Linear,
-            ..Default::default()
-        });
+        let sampler = trilinear_sampler(&ctx.device, p.edges, "pomkit material");
         let field = material.height.as_deref();
         let has_normals = explicit_normals.is_some() || field.is_some_and(|f| f.width() >= 2 && f.height() >= 2);
         let params = PomkitParams::from_material(material, technique);
