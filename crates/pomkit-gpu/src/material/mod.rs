@@ -9,11 +9,11 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use glam::{Mat3, Mat4, Vec3};
+use pomkit_core::HeightField;
 use pomkit_core::bake::NormalFilter;
 use pomkit_core::mesh::Mesh;
 use pomkit_core::scene::{Camera, Light, Material, NormalMap, Texture};
 use pomkit_core::trace::Technique;
-use pomkit_core::HeightField;
 use wgpu::util::DeviceExt;
 
 use crate::height::{HeightMaps, HeightPassOptions, HeightPasses};
