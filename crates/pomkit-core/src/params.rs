@@ -163,15 +163,13 @@ impl Kind {
     /// Whether `v` is of this kind and in range (an integer counts as a number).
     #[must_use]
     pub fn accepts(&self, v: &Value) -> bool {
-        match (*self, *v) {
-            (Kind::Float { min, min_exclusive, max, .. }, Value::Float(_) | Value::Int(_)) => {
-                let x = if let Value::Int(n) = *v {
-                    n as f64
-                } else if let Value::Float(x) = *v {
-                    x
-                } else {
-                    0.0
-                };
+        // A whole number is a number where one is expected.
+        let v = match (*self, *v) {
+            (Kind::Float { .. }, Value::Int(n)) => Value::Float(n as f64),
+            (_, v) => v,
+        };
+        match (*self, v) {
+            (Kind::Float { min, min_exclusive, max, .. }, Value::Float(x)) => {
                 x.is_finite() && (if min_exclusive { x > min } else { x >= min }) && x <= max
             }
             (Kind::Int { .. }, Value::Int(_)) | (Kind::Bool, Value::Bool(_)) => true,
