@@ -21,12 +21,12 @@
 
 use std::error::Error;
 
-use pomkit_core::HeightField;
 use pomkit_core::glam::camera::rh::{proj::directx::perspective_infinite_reverse, view::look_at_mat4};
 use pomkit_core::glam::{Mat4, Vec2, Vec3};
 use pomkit_core::procedural::{Pattern, generate};
 use pomkit_core::shadow::{ShadowMode, ShadowParams};
 use pomkit_core::trace::{Technique, TraceParams};
+use pomkit_core::{EdgeMode, HeightField};
 use pomkit_gpu::height::HeightPasses;
 use pomkit_gpu::host::{HeightBindings, HeightResource, HeightResourceOptions};
 use pomkit_gpu::library::PomkitParams;
@@ -106,11 +106,11 @@ fn open_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo)> {
 }
 
 /// pomkit's parameters for one material, from pomkit_core's types: `depth_scale` UV units
-/// deep, soft self-shadows, the relief traced up to mip 4 (the LOD fade).
+/// deep with wrapping edges, the default sample counts, soft self-shadows, the relief traced up
+/// to mip 4 (the LOD fade).
 fn params(technique: Technique, depth_scale: f32) -> Result<PomkitParams> {
-    let trace = TraceParams { depth_scale, ..TraceParams::default() };
     let shadow = ShadowParams { mode: ShadowMode::Soft, softness: 0.1 };
-    Ok(PomkitParams::new(technique, shadow, trace, 4.0)?)
+    Ok(PomkitParams::new(technique, shadow, TraceParams::default(), depth_scale, EdgeMode::Wrap, 4.0)?)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -555,8 +555,8 @@ mod tests {
     /// `technique` with `depth_scale`, soft shadows, and no LOD fade (the analytic checks want
     /// the full technique everywhere).
     fn unfaded(technique: Technique, depth_scale: f32) -> PomkitParams {
-        let trace = TraceParams { depth_scale, ..TraceParams::default() };
-        PomkitParams::new(technique, ShadowParams { mode: ShadowMode::Soft, softness: 0.1 }, trace, 100.0)
+        let shadow = ShadowParams { mode: ShadowMode::Soft, softness: 0.1 };
+        PomkitParams::new(technique, shadow, TraceParams::default(), depth_scale, EdgeMode::Wrap, 100.0)
             .expect("valid parameters")
     }
 

@@ -300,7 +300,7 @@ fn accuracy(method: Method, field: &HeightField, surface: &Surface, flipped: boo
             }
             let dir = pomkit_core::glam::Vec3::new(d.x, d.z, d.y).normalize();
             let start = pomkit_core::glam::Vec2::new(uv0.x, uv0.y);
-            let params = TraceParams { depth_scale: DEPTH_SCALE, ..TraceParams::default() };
+            let params = TraceParams::default();
             let truth = trace(surface, &Ray::new(start, dir), Technique::Exact, &params).uv;
             let got = pixel(&frame, x, y);
             // Bevy's probe reads a repeating texture: compare within the tile, and skip hits

@@ -139,7 +139,7 @@ fn keys(
     }
     for (key, factor) in [(KeyCode::ArrowUp, 1.25f32), (KeyCode::ArrowDown, 0.8)] {
         if input.just_pressed(key) {
-            change(&|e| e.trace.depth_scale = (e.trace.depth_scale * factor).clamp(0.005, 0.5));
+            change(&|e| e.depth_scale = (e.depth_scale * factor).clamp(0.005, 0.5));
             if let Some(mut m) = standard.get_mut(&bevy_materials.standard) {
                 m.parallax_depth_scale = (m.parallax_depth_scale * factor).clamp(0.005, 0.5);
             }
@@ -211,7 +211,7 @@ fn overlay(
         e.shadow.mode.name(),
         if e.pixel_depth_offset { "on" } else { "off" },
         e.debug,
-        e.trace.depth_scale,
+        e.depth_scale,
     );
     if window.title != title {
         window.title = title;

@@ -285,8 +285,8 @@ fn build_height_maps(
             source: e.height_map.id(),
             kind: e.map_kind,
             channel: e.channel,
-            edges: e.trace.edges,
-            depth_scale_bits: e.trace.depth_scale.to_bits(),
+            edges: e.edges,
+            depth_scale_bits: e.depth_scale.to_bits(),
             cones: e.technique == Technique::Cone,
         };
         let stale = maps.built.get(&id) != Some(&want) || changed.contains(&want.source);
@@ -368,7 +368,7 @@ fn build_height_maps(
 /// The depth scale the maps are built with: a bad one is reported by `params` and the material
 /// drawn plain, so the tracers' own stand-in will do here.
 fn want_depth_scale(s: f32) -> f32 {
-    TraceParams { depth_scale: s, ..TraceParams::default() }.sanitized().depth_scale
+    pomkit_core::trace::sanitized_depth_scale(s)
 }
 
 /// Reports meshes drawn with a pomkit material that lack what tracing needs (UVs, normals and

@@ -14,6 +14,7 @@ use bevy::render::render_resource::{
 };
 use bevy::render::texture::GpuImage;
 use bevy::shader::{ShaderDefVal, ShaderRef};
+use pomkit_core::EdgeMode;
 use pomkit_core::shadow::ShadowParams;
 use pomkit_core::trace::{Technique, TraceParams};
 use pomkit_gpu::library::{ParamError, PomkitParams};
@@ -51,8 +52,8 @@ impl PomkitDebug {
 /// [`PomkitMaterial`](crate::PomkitMaterial).
 ///
 /// The fields are the settings; the plugin builds the textures the shader reads from
-/// `height_map` (and rebuilds them when the image, `map_kind`, `channel`, `trace.edges` or
-/// `trace.depth_scale` change).
+/// `height_map` (and rebuilds them when the image, `map_kind`, `channel`, `edges` or
+/// `depth_scale` change).
 #[derive(Asset, AsBindGroup, TypePath, Debug, Clone)]
 #[uniform(100, PomkitUniform)]
 #[bind_group_data(PomkitKey)]
@@ -67,8 +68,14 @@ pub struct Pomkit {
     pub technique: Technique,
     /// Self-shadowing from directional lights (default none).
     pub shadow: ShadowParams,
-    /// Depth scale (UV units below the surface of the deepest point, default 0.1), samples and
-    /// edge mode; docs/SCENES.md gives each parameter's meaning and range.
+    /// How far below the surface, in UV units (tile widths), the deepest point lies: greater
+    /// than 0 and at most 16. Default 0.1.
+    pub depth_scale: f32,
+    /// Texture addressing: wrap tiles the height map, clamp repeats its edge texels. Default
+    /// wrap.
+    pub edges: EdgeMode,
+    /// Sample counts, refinement steps and perspective bias; docs/SCENES.md gives each
+    /// parameter's meaning and range.
     pub trace: TraceParams,
     /// The full technique runs up to this mip level of the height map and fades out over the
     /// next (Tatarchuk 2006); `f32::MAX` never fades. Default 4.
@@ -104,14 +111,17 @@ impl Pomkit {
     /// `pom` with pomkit's defaults on `height_map` (white high).
     #[must_use]
     pub fn new(height_map: Handle<Image>) -> Self {
+        let defaults = pomkit_core::scene::Material::default();
         Self {
             height_map,
             map_kind: MapKind::Height,
             channel: Channel::Luma,
             technique: Technique::Pom,
             shadow: ShadowParams::default(),
+            depth_scale: defaults.depth_scale,
+            edges: defaults.edges,
             trace: TraceParams::default(),
-            lod_threshold: pomkit_core::scene::Material::default().lod_threshold,
+            lod_threshold: defaults.lod_threshold,
             pixel_depth_offset: true,
             shadow_pixel_depth: false,
             normals: true,
@@ -139,7 +149,7 @@ impl Pomkit {
     /// The same with another depth scale.
     #[must_use]
     pub fn with_depth_scale(mut self, depth_scale: f32) -> Self {
-        self.trace.depth_scale = depth_scale;
+        self.depth_scale = depth_scale;
         self
     }
 
@@ -149,7 +159,7 @@ impl Pomkit {
     /// [`ParamError`] naming a parameter the tracers refuse (a depth scale that is not finite
     /// and positive, a sample count out of range, ...).
     pub fn params(&self) -> Result<PomkitParams, ParamError> {
-        PomkitParams::new(self.technique, self.shadow, self.trace, self.lod_threshold)
+        PomkitParams::new(self.technique, self.shadow, self.trace, self.depth_scale, self.edges, self.lod_threshold)
     }
 
     /// Whether the plugin has built this material's height textures.

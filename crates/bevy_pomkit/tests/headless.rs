@@ -134,7 +134,7 @@ fn rg(frame: &Frame, k: usize) -> Vec2 {
 /// The CPU tracer's hit for the pixel `k` of the quad: the same ray in pomkit-core's ray terms
 /// (u along +x, v along +z, z up; 2 world units per UV unit on both axes, so the direction
 /// needs no stretch), at the mip level the pixel's UV footprint selects.
-fn cpu_hit(surface: &Surface, rays: &[Ray3d], k: usize, technique: Technique, depth_scale: f32) -> Option<Vec2> {
+fn cpu_hit(surface: &Surface, rays: &[Ray3d], k: usize, technique: Technique) -> Option<Vec2> {
     let ray = rays[k];
     let uv0 = quad_uv(hit_plane(ray, 0.0)?);
     let d = ray.direction.as_vec3();
@@ -153,7 +153,7 @@ fn cpu_hit(surface: &Surface, rays: &[Ray3d], k: usize, technique: Technique, de
         size,
         surface.mips().max_level(),
     );
-    let params = TraceParams { depth_scale, lod, ..TraceParams::default() };
+    let params = TraceParams { lod, ..TraceParams::default() };
     let hit = trace(
         surface,
         &Ray::new(pomkit_core::glam::Vec2::new(uv0.x, uv0.y), pomkit_core::glam::Vec3::new(dir.x, dir.y, dir.z)),
@@ -181,7 +181,7 @@ fn hit_uv_agrees_with_pomkit_core_for_the_same_rays() {
         assert!(pixels.len() > (W * H / 3) as usize, "the quad covers too little of the frame: {}", pixels.len());
         let errors: Vec<f32> = pixels
             .iter()
-            .filter_map(|&(k, _)| Some((rg(&frame, k) - cpu_hit(&surface, &rays, k, technique, 0.1)?).length() * 64.0))
+            .filter_map(|&(k, _)| Some((rg(&frame, k) - cpu_hit(&surface, &rays, k, technique)?).length() * 64.0))
             .collect();
         let (median, p90) = (quantile(errors.clone(), 0.5), quantile(errors.clone(), 0.9));
         let far = errors.iter().filter(|&&e| e > 1.0).count() as f32 / errors.len() as f32;
@@ -403,7 +403,7 @@ fn bad_inputs_draw_the_plain_material_and_say_why() {
         let heights = app.world().resource_mut::<Assets<Image>>().add(image);
         let mut ext = Pomkit::new(heights);
         if case == "depth scale" {
-            ext.trace.depth_scale = f32::NAN;
+            ext.depth_scale = f32::NAN;
         }
         let material = app
             .world()
@@ -564,7 +564,7 @@ fn self_shadows_agree_with_pomkit_core() {
         // pomkit-core for the same rays: the exact hit, then its shadow toward the same light
         // in ray terms (u along +x, v along +z, up).
         let light = pomkit_core::glam::Vec3::new(to_light.x, to_light.z, to_light.y);
-        let params = TraceParams { depth_scale: 0.1, ..TraceParams::default() };
+        let params = TraceParams::default();
         let (mut n, mut differ, mut shadowed) = (0, 0, 0);
         for (k, _) in inside(&rays, 0.02) {
             let d = rays[k].direction.as_vec3();

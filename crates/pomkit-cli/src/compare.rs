@@ -83,15 +83,18 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     }
     let out_id = outs.output(&out);
     outs.check()?;
-    let surface = a.height.surface(&params, techniques.contains(&pomkit_core::trace::Technique::Cone))?;
+    let surface = a.height.surface(&a.options, techniques.contains(&pomkit_core::trace::Technique::Cone))?;
     let (w, h) = (surface.field().width(), surface.field().height());
     let pb = progress::items((angles.len() * a.rays) as u64, MIN_RAYS_FOR_BAR, "comparing", "rays");
     let rows = accuracy::compare(&surface, &techniques, &angles, &params, a.rays, a.seed, &|n| pb.inc(n as u64));
     pb.finish_and_clear();
-    let edges = format!("{:?}", params.edges).to_lowercase();
+    let edges = surface.edges().name();
     let caption = format!(
         "Error in texels against `exact` on {} ({w}x{h}, depth scale {}, {edges} edges), {} rays per angle, seed {}.",
-        a.height.input, params.depth_scale, a.rays, a.seed
+        a.height.input,
+        surface.depth_scale(),
+        a.rays,
+        a.seed
     );
     outs.write_with(out_id, |wr| {
         match a.format {

@@ -172,26 +172,28 @@ impl HeightOption {
         files
     }
 
-    /// The height field prepared for tracing with `params`, with the cone map of `--cone-map`
-    /// when one is given, or else, when `cones` (the `cone` technique will run), the cones
-    /// built here under a progress bar.
+    /// The height field prepared for tracing at the depth scale and with the edges of
+    /// `options` (checked by [`technique::TechniqueArgs::params`]), with the cone map of
+    /// `--cone-map` when one is given, or else, when `cones` (the `cone` technique will run),
+    /// the cones built here under a progress bar.
     pub(crate) fn surface(
         &self,
-        params: &pomkit_core::trace::TraceParams,
+        options: &technique::TechniqueArgs,
         cones: bool,
     ) -> Result<pomkit_core::trace::Surface> {
         let field = self.load()?;
         let (w, h) = (field.width(), field.height());
-        let mut surface = pomkit_core::trace::Surface::new(field, params.edges, params.depth_scale);
+        let edges = options.edges();
+        let mut surface = pomkit_core::trace::Surface::new(field, edges, options.depth_scale);
         if let Some(path) = &self.cone_map {
-            let cones = pomkit_io::load_cone_map(path, w, h, params.edges)?;
+            let cones = pomkit_io::load_cone_map(path, w, h, edges)?;
             surface.set_cones(cones).with_context(|| format!("--cone-map {}", path.display()))?;
         } else if cones {
             let built = progress::rows(
                 h,
                 w.saturating_mul(CONE_TEXEL_WEIGHT),
                 &format!("building the cones of {w}x{h}"),
-                |tick| pomkit_core::cone::ConeMap::conservative_with_progress(surface.field(), params.edges, tick),
+                |tick| pomkit_core::cone::ConeMap::conservative_with_progress(surface.field(), edges, tick),
             );
             surface.set_cones(built).context("internal error: cones of another size")?;
         }

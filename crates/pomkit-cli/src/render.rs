@@ -174,7 +174,7 @@ fn build_cones(scene: &Scene, modes: &[Mode]) -> Vec<std::sync::Arc<pomkit_core:
         .filter(|m| m.cones.is_none() && modes.iter().any(|mode| mode.technique(m.technique) == Technique::Cone))
         .filter_map(|m| {
             let field = m.height.as_ref()?;
-            let edges = m.trace.sanitized().edges;
+            let edges = m.edges;
             let what = format!("building the cones of \"{}\" ({}x{})", m.name, field.width(), field.height());
             Some(progress::rows(
                 field.height(),

@@ -4,9 +4,11 @@
 use anyhow::{Result, bail};
 use clap::Args;
 use clap::builder::{PossibleValuesParser, TypedValueParser};
+use pomkit_core::EdgeMode;
 use pomkit_core::params;
 use pomkit_core::trace::{
     MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MIN_PERSPECTIVE_BIAS, Technique, TraceParamError, TraceParams,
+    check_depth_scale,
 };
 
 use crate::bake::EdgesArg;
@@ -51,10 +53,11 @@ pub struct TechniqueArgs {
 }
 
 impl TechniqueArgs {
-    /// The trace parameters these options give, checked; errors name the flag at fault.
+    /// The trace parameters these options give, checked with `--depth-scale`; errors name the
+    /// flag at fault. The depth scale and the edge mode are the surface's
+    /// ([`crate::HeightOption::surface`]).
     pub fn params(&self) -> Result<TraceParams> {
         let params = TraceParams {
-            depth_scale: self.depth_scale,
             min_samples: self.min_samples,
             max_samples: self.max_samples,
             samples: self.samples,
@@ -62,10 +65,9 @@ impl TechniqueArgs {
             binary_steps: self.binary_steps,
             refine: self.refine,
             perspective_bias: self.perspective_bias,
-            edges: self.edges.into(),
             ..TraceParams::default()
         };
-        if let Err(e) = params.validate() {
+        if let Err(e) = check_depth_scale(self.depth_scale).and_then(|()| params.validate()) {
             match e {
                 TraceParamError::DepthScale(v) => {
                     bail!(
@@ -88,6 +90,11 @@ impl TechniqueArgs {
             }
         }
         Ok(params)
+    }
+
+    /// `--edges`.
+    pub fn edges(&self) -> EdgeMode {
+        self.edges.into()
     }
 }
 

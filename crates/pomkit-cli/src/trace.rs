@@ -81,7 +81,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
         (Box::new(BufReader::new(file)), a.rays.display().to_string())
     };
     let mut rays = RayReader::new(reader, &name)?;
-    let surface = a.height.surface(&params, a.technique == Technique::Cone)?;
+    let surface = a.height.surface(&a.options, a.technique == Technique::Cone)?;
     let mut counter = progress::Counter::new(MIN_RAYS_FOR_BAR, "tracing", "rays");
     let mut count = 0u64;
     // Streamed: a batch of rays is read, traced in parallel and written, then the next, so

@@ -13,7 +13,7 @@ use pomkit_core::mesh::Mesh;
 use pomkit_core::procedural::{Pattern, generate};
 use pomkit_core::scene::{Camera, Light, Material, Object, Scene};
 use pomkit_core::shadow::{ShadowMode, ShadowParams};
-use pomkit_core::trace::{MAX_DEPTH_SCALE, Technique, TraceParams};
+use pomkit_core::trace::{MAX_DEPTH_SCALE, Technique};
 use pomkit_core::{EdgeMode, HeightField};
 use pomkit_cpu::{CpuRenderer, RenderOptions};
 use support::{pomkit, refuses, stderr};
@@ -251,7 +251,8 @@ fn cpu_renderer_draws_uvs_of_1e15_with_exact() {
         materials: vec![Material {
             height: Some(Arc::new(field)),
             technique: Technique::Exact,
-            trace: TraceParams { depth_scale: 0.1, edges: EdgeMode::Wrap, ..Default::default() },
+            depth_scale: 0.1,
+            edges: EdgeMode::Wrap,
             shadow: ShadowParams { mode: ShadowMode::Exact, ..Default::default() },
             ..Material::default()
         }],

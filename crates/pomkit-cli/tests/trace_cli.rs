@@ -9,6 +9,7 @@ use pomkit_core::EdgeMode;
 use pomkit_core::accuracy;
 use pomkit_core::glam::{Vec2, Vec3};
 use pomkit_core::procedural::{self, Pattern};
+use pomkit_core::scene::Material;
 use pomkit_core::trace::{Ray, Surface, Technique, TraceParams, trace};
 
 fn pomkit(args: &[&str], dir: &Path) -> Output {
@@ -76,9 +77,9 @@ fn trace_gives_exactly_what_core_gives() {
     std::fs::write(dir.path().join("rays.csv"), rays_csv(&rays)).unwrap();
     let field = procedural::generate(Pattern::Pyramids, 64, 64);
     // Default options, then changed ones: every option must reach the tracer.
-    let defaults = TraceParams::default();
+    let d = Material::default();
+    let defaults = (TraceParams::default(), d.depth_scale, d.edges);
     let changed = TraceParams {
-        depth_scale: 0.06,
         min_samples: 5,
         max_samples: 17,
         samples: 11,
@@ -86,9 +87,9 @@ fn trace_gives_exactly_what_core_gives() {
         binary_steps: 4,
         refine: 2,
         perspective_bias: 0.5,
-        edges: EdgeMode::Clamp,
         ..TraceParams::default()
     };
+    let changed = (changed, 0.06, EdgeMode::Clamp);
     let changed_flags = [
         "--depth-scale",
         "0.06",
@@ -109,8 +110,8 @@ fn trace_gives_exactly_what_core_gives() {
         "--edges",
         "clamp",
     ];
-    for (params, extra) in [(defaults, &[][..]), (changed, &changed_flags[..])] {
-        let surface = Surface::new(field.clone(), params.edges, params.depth_scale);
+    for ((params, depth_scale, edges), extra) in [(defaults, &[][..]), (changed, &changed_flags[..])] {
+        let surface = Surface::new(field.clone(), edges, depth_scale);
         for technique in Technique::ALL {
             let mut args = vec![
                 "trace",
@@ -255,7 +256,8 @@ fn compare_csv_has_one_row_per_technique_and_angle() {
     }
     // Independent path: core's table for the same defaults.
     let params = TraceParams::default();
-    let surface = Surface::new(procedural::generate(Pattern::Pyramids, 64, 64), params.edges, params.depth_scale);
+    let d = Material::default();
+    let surface = Surface::new(procedural::generate(Pattern::Pyramids, 64, 64), d.edges, d.depth_scale);
     let want = accuracy::compare(
         &surface,
         &Technique::ALL,

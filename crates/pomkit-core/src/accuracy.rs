@@ -333,7 +333,7 @@ mod tests {
         // Depth 0.5 lies on a plane of the default 32-plane search, so steep is exact too.
         let c = 0.5;
         let params = TraceParams::default();
-        let surface = Surface::new(HeightField::constant(64, 64, c), EdgeMode::Wrap, params.depth_scale);
+        let surface = Surface::new(HeightField::constant(64, 64, c), EdgeMode::Wrap, 0.1);
         let angles = [0.0, 30.0, 60.0, 75.0];
         let rows = compare(&surface, &Technique::ALL, &angles, &params, 200, 9, &no_progress);
         assert_eq!(rows.len(), angles.len() * Technique::ALL.len());
@@ -360,7 +360,7 @@ mod tests {
     #[test]
     fn statistics_are_consistent_with_the_errors() {
         let params = TraceParams::default();
-        let surface = Surface::new(procedural::generate(Pattern::Pyramids, 64, 64), EdgeMode::Wrap, params.depth_scale);
+        let surface = Surface::new(procedural::generate(Pattern::Pyramids, 64, 64), EdgeMode::Wrap, 0.1);
         let angles = [0.0, 60.0, 85.0];
         let total = std::sync::atomic::AtomicUsize::new(0);
         let count = |n: usize| {

@@ -27,7 +27,8 @@ pub fn procedural_material(pattern: Pattern, size: u32, depth_scale: f32) -> Mat
         base_color: Vec3::ONE,
         height: Some(Arc::new(field)),
         technique: Technique::Pom,
-        trace: TraceParams { depth_scale, min_samples: 8, max_samples: 32, refine: 2, ..TraceParams::default() },
+        depth_scale,
+        trace: TraceParams { min_samples: 8, max_samples: 32, refine: 2, ..TraceParams::default() },
         shadow: ShadowParams { mode: ShadowMode::Soft, softness: 0.08 },
         ..Material::default()
     }

@@ -19,9 +19,10 @@
 //! let normals = bake_normals(&field, &opts)?;
 //! assert_eq!(normals.len(), 256 * 256);
 //!
-//! // Trace a view ray with parallax occlusion mapping, then shadow the hit point softly.
-//! let params = TraceParams { depth_scale: 0.1, refine: 2, ..Default::default() };
-//! let surface = Surface::new(field, EdgeMode::Wrap, params.depth_scale);
+//! // Trace a view ray with parallax occlusion mapping, then shadow the hit point softly. The
+//! // surface holds the depth scale (the deepest point lies 0.1 tile widths down) and the edges.
+//! let surface = Surface::new(field, EdgeMode::Wrap, 0.1);
+//! let params = TraceParams { refine: 2, ..Default::default() };
 //! let ray = Ray::new(Vec2::new(0.3, 0.4), Vec3::new(0.6, 0.1, -0.8));
 //! let hit = trace(&surface, &ray, Technique::Pom, &params);
 //! let light = Vec3::new(-0.5, 0.2, 0.7); // toward the light, in the same (u, v, normal) frame

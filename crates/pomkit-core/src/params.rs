@@ -733,7 +733,7 @@ pub fn value_of(m: &crate::scene::Material, key: &str) -> Option<Value> {
     let t = &m.trace;
     Some(match key {
         "technique" => Value::Name(m.technique.name()),
-        "depth_scale" => f(t.depth_scale),
+        "depth_scale" => f(m.depth_scale),
         "min_samples" => i(t.min_samples),
         "max_samples" => i(t.max_samples),
         "samples" => i(t.samples),
@@ -744,7 +744,7 @@ pub fn value_of(m: &crate::scene::Material, key: &str) -> Option<Value> {
         "shadow" => Value::Name(m.shadow.mode.name()),
         "softness" => f(m.shadow.softness),
         "lod_threshold" => f(m.lod_threshold),
-        "edges" => Value::Name(t.edges.name()),
+        "edges" => Value::Name(m.edges.name()),
         "specular" => f(m.specular),
         "shininess" => f(m.shininess),
         "pixel_depth_offset" => Value::Bool(m.pixel_depth_offset),

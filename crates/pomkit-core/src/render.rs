@@ -144,7 +144,9 @@ pub fn validate(scene: &Scene, opts: &RenderOptions) -> Result<(), RenderError> 
         }
     }
     for m in &scene.materials {
-        m.trace.validate().map_err(|e| RenderError::Params { material: m.name.clone(), reason: e.to_string() })?;
+        crate::trace::check_depth_scale(m.depth_scale)
+            .and_then(|()| m.trace.validate())
+            .map_err(|e| RenderError::Params { material: m.name.clone(), reason: e.to_string() })?;
     }
     scene.check_drawable()?;
     Ok(())

@@ -429,9 +429,16 @@ pub struct Material {
     pub normal_map: Option<Arc<NormalMap>>,
     /// Height field (depth inside pomkit). Without it the material is flat or normal-mapped.
     pub height: Option<Arc<HeightField>>,
-    /// Technique and its parameters; `trace.depth_scale` is the material's depth scale and
-    /// `trace.edges` its texture addressing.
+    /// The displacement technique.
     pub technique: Technique,
+    /// How far below the polygon, in UV units (tile widths), the deepest point of `height`
+    /// lies: greater than 0 and at most [`crate::trace::MAX_DEPTH_SCALE`]. The renderers build
+    /// the material's [`crate::trace::Surface`] for it (and the baked normals and displaced
+    /// meshes).
+    pub depth_scale: f32,
+    /// Texture addressing of every map of the material: wrap tiles them, clamp repeats the
+    /// edge texels.
+    pub edges: EdgeMode,
     /// Technique options.
     pub trace: TraceParams,
     /// Self-shadowing.
@@ -461,6 +468,7 @@ pub struct Material {
 mod defaults {
     use crate::params as p;
     pub const BASE_COLOR: [f32; 3] = p::BASE_COLOR.default.color();
+    pub const DEPTH_SCALE: f32 = p::DEPTH_SCALE.default.f32();
     pub const LOD_THRESHOLD: f32 = p::LOD_THRESHOLD.default.f32();
     pub const SPECULAR: f32 = p::SPECULAR.default.f32();
     pub const SHININESS: f32 = p::SHININESS.default.f32();
@@ -479,6 +487,8 @@ impl Default for Material {
             normal_map: None,
             height: None,
             technique: Technique::Pom,
+            depth_scale: p::DEPTH_SCALE,
+            edges: EdgeMode::Wrap,
             trace: TraceParams::default(),
             shadow: ShadowParams::default(),
             lod_threshold: p::LOD_THRESHOLD,
@@ -499,7 +509,7 @@ impl Material {
     pub fn cones_to_trace(&self) -> Option<Arc<crate::cone::ConeMap>> {
         let field = self.height.as_ref()?;
         let own = self.cones.as_ref().filter(|c| c.check_size(field.width(), field.height()).is_ok());
-        Some(own.cloned().unwrap_or_else(|| crate::cone::cached(field, self.trace.sanitized().edges)))
+        Some(own.cloned().unwrap_or_else(|| crate::cone::cached(field, self.edges)))
     }
 }
 

@@ -159,7 +159,7 @@ pub fn shadow(
     }
     let p = params.sanitized();
     // UV offset per unit of depth climbed toward the light.
-    let s = Vec2::new(l.x, l.y) * (p.depth_scale / l.z.max(MIN_COS));
+    let s = Vec2::new(l.x, l.y) * (surface.depth_scale() / l.z.max(MIN_COS));
     match shadow.mode {
         ShadowMode::None => Shadow { visibility: 1.0, fetches: 0 },
         // McGuire 2005's fur and grass: darker the deeper, no light ray.

@@ -167,7 +167,7 @@ pub fn trace_curved(
         }
         // A cone map holds for the straight ray only: a bent `cone` ray is walked as `exact`'s
         // (the same hits: both are exact).
-        Technique::Exact | Technique::Cone => exact_curved(surface, reduced, dir, &p, &bend),
+        Technique::Exact | Technique::Cone => exact_curved(surface, reduced, dir, &bend),
         _ => {
             let h = march(surface, reduced, dir, technique, &p, &bend);
             (h.uv, h.depth * bend.t_end, h.fetches, !(bend.exits && h.depth >= 1.0))
@@ -190,8 +190,8 @@ pub fn trace_curved(
 /// `exact` along the bent ray: the parabola `z = t - c t^2` as a polyline of chords, each solved
 /// exactly against the bilinear surface by the pyramid walk. Returns the hit's UV, its straight
 /// depth, the fetches and whether it was found before the ray left.
-fn exact_curved(surface: &Surface, uv0: Vec2, dir: Vec3, p: &TraceParams, bend: &Bend) -> (Vec2, f32, u32, bool) {
-    let s = uv_per_depth(dir, p.depth_scale);
+fn exact_curved(surface: &Surface, uv0: Vec2, dir: Vec3, bend: &Bend) -> (Vec2, f32, u32, bool) {
+    let s = uv_per_depth(dir, surface.depth_scale());
     let f = surface.field();
     let (w, h) = (f64::from(f.width()), f64::from(f.height()));
     let (ox, oy) = (f64::from(uv0.x) * w, f64::from(uv0.y) * h);
@@ -441,7 +441,7 @@ mod tests {
     fn without_curvature_every_technique_traces_as_on_the_plane() {
         let field = generate(Pattern::Cobblestones, 64, 64);
         let surface = Surface::new(field, EdgeMode::Wrap, 0.08);
-        let p = TraceParams { depth_scale: 0.08, refine: 2, ..Default::default() };
+        let p = TraceParams { refine: 2, ..Default::default() };
         for technique in Technique::ALL {
             for k in 0..40 {
                 let a = k as f32 * 0.37;
@@ -461,7 +461,7 @@ mod tests {
     fn a_constant_field_is_met_or_left_where_the_parabola_says() {
         let d0 = 0.5;
         let surface = constant(d0, EdgeMode::Wrap);
-        let p = TraceParams { depth_scale: 0.1, samples: 64, min_samples: 64, max_samples: 64, ..Default::default() };
+        let p = TraceParams { samples: 64, min_samples: 64, max_samples: 64, ..Default::default() };
         let ray = Ray::new(Vec2::new(0.3, 0.6), Vec3::new(0.8, 0.1, -0.3));
         for c in [-3.0f32, -0.5, 0.0, 0.2, 0.45, 0.49, 0.51, 1.0, 4.0, 100.0] {
             let want = if 4.0 * c * d0 <= 1.0 {
@@ -502,7 +502,7 @@ mod tests {
     #[test]
     fn a_ray_leaving_a_clamped_chart_is_discarded_and_one_inside_is_kept() {
         let surface = constant(0.5, EdgeMode::Clamp);
-        let p = TraceParams { depth_scale: 0.1, edges: EdgeMode::Clamp, ..Default::default() };
+        let p = TraceParams::default();
         // Depth 0.5 lies 0.05 * 0.5 / 0.3 * 0.95 = 0.08 UV along +u: out of the chart from
         // u = 0.95, inside from u = 0.5.
         let dir = Vec3::new(0.95, 0.0, -0.3);

@@ -14,10 +14,6 @@ fn surface(f: HeightField, edges: EdgeMode) -> Surface {
     Surface::new(f, edges, 0.1)
 }
 
-fn params(edges: EdgeMode) -> TraceParams {
-    TraceParams { edges, ..Default::default() }
-}
-
 /// Texel distance between two UVs on an N x N field.
 fn texels(a: Vec2, b: Vec2) -> f32 {
     ((a - b) * N as f32).length()
@@ -58,7 +54,7 @@ fn exact_matches_brute_force_on_analytic_fields_at_every_angle() {
             let s = surface(f.clone(), edges);
             for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
                 for ray in rays_over(24, angle, 7) {
-                    let hit = trace(&s, &ray, Technique::Exact, &params(edges));
+                    let hit = trace(&s, &ray, Technique::Exact, &TraceParams::default());
                     let truth = brute_force(&f, edges, &ray, 0.1);
                     let err = texels(hit.uv, on_ray(&ray, truth, 0.1));
                     assert!(
@@ -79,7 +75,7 @@ fn flat_field_gives_each_technique_its_stated_error() {
     for angle in [0.0f32, 30.0, 60.0, 75.0] {
         for ray in rays_over(8, angle, 3) {
             let truth = on_ray(&ray, f64::from(c), 0.1);
-            let p = params(EdgeMode::Wrap);
+            let p = TraceParams::default();
             let len = (on_ray(&ray, 1.0, 0.1) - ray.uv).length() * N as f32; // texels per unit depth
             let err = |t| texels(trace(&s, &ray, t, &p).uv, truth);
             // Linear profiles are found exactly by the piecewise-linear intersection.
@@ -105,7 +101,7 @@ fn tilted_plane_is_found_exactly_by_linear_intersections() {
     // A plane in u: the bilinear surface equals it away from the wrap seam; use clamp.
     let f = HeightField::from_height_fn(N, N, |x, _| 0.1 + 0.8 * x as f32 / (N - 1) as f32);
     let s = surface(f.clone(), EdgeMode::Clamp);
-    let p = params(EdgeMode::Clamp);
+    let p = TraceParams::default();
     for angle in [0.0f32, 30.0, 60.0] {
         for ray in rays_over(16, angle, 11) {
             let ray = Ray { uv: ray.uv * 0.6 + 0.2, ..ray };
@@ -128,7 +124,7 @@ fn sampling_techniques_stay_within_a_step_on_smooth_fields() {
     // check the mean, which also shows the ordering steep > pom > exact.
     for (name, f) in analytic_fields().into_iter().filter(|(n, _)| *n == "sphere cap" || *n == "pyramid") {
         let s = surface(f.clone(), EdgeMode::Wrap);
-        let p = params(EdgeMode::Wrap);
+        let p = TraceParams::default();
         let rays = rays_over(64, 60.0, 5);
         let mean = |t: Technique| {
             rays.iter().map(|r| texels(trace(&s, r, t, &p).uv, trace(&s, r, Technique::Exact, &p).uv)).sum::<f32>()
@@ -146,7 +142,7 @@ fn sampling_techniques_stay_within_a_step_on_smooth_fields() {
 fn exact_finds_the_one_texel_spike_at_85_degrees_where_pom_misses() {
     let f = generate(Pattern::Spike, N, N);
     let s = surface(f.clone(), EdgeMode::Wrap);
-    let p = TraceParams { min_samples: 32, max_samples: 32, ..params(EdgeMode::Wrap) };
+    let p = TraceParams { min_samples: 32, max_samples: 32, ..TraceParams::default() };
     // The spike's centre is texel (32, 32): aim rays along +u to pass over it at depths around
     // a half, and count how many each technique sees.
     let centre = Vec2::splat((N / 2) as f32 + 0.5) / N as f32;
@@ -182,7 +178,7 @@ fn refinement_reduces_pom_error() {
     let s = surface(f, EdgeMode::Wrap);
     let rays = rays_over(200, 75.0, 9);
     let mean = |refine: u32| {
-        let p = TraceParams { refine, ..params(EdgeMode::Wrap) };
+        let p = TraceParams { refine, ..TraceParams::default() };
         rays.iter()
             .map(|r| texels(trace(&s, r, Technique::Pom, &p).uv, trace(&s, r, Technique::Exact, &p).uv))
             .sum::<f32>()
@@ -193,7 +189,7 @@ fn refinement_reduces_pom_error() {
 #[test]
 fn back_facing_and_degenerate_rays_return_the_entry_point() {
     let s = surface(generate(Pattern::Bricks, N, N), EdgeMode::Wrap);
-    let p = params(EdgeMode::Wrap);
+    let p = TraceParams::default();
     for dir in
         [Vec3::new(0.3, 0.0, 0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::ZERO, Vec3::NAN, Vec3::new(0.0, 0.0, f32::INFINITY)]
     {
@@ -207,14 +203,14 @@ fn back_facing_and_degenerate_rays_return_the_entry_point() {
 #[test]
 fn parameters_are_validated_and_sanitized() {
     let bad = [
-        TraceParams { depth_scale: 0.0, ..Default::default() },
-        TraceParams { depth_scale: -1.0, ..Default::default() },
-        TraceParams { depth_scale: f32::NAN, ..Default::default() },
         TraceParams { perspective_bias: f32::INFINITY, ..Default::default() },
         TraceParams { min_samples: 40, max_samples: 8, ..Default::default() },
     ];
     for p in bad {
         assert!(p.validate().is_err(), "{p:?}");
+    }
+    for bad in [0.0, -1.0, f32::NAN] {
+        assert!(pomkit_core::trace::check_depth_scale(bad).is_err(), "{bad}");
     }
     // Huge and zero counts are clamped, never hang.
     let s = surface(generate(Pattern::Waves, 16, 16), EdgeMode::Wrap);
@@ -242,7 +238,7 @@ proptest! {
         let pattern = [Pattern::Cobblestones, Pattern::Spike, Pattern::Text, Pattern::Bricks][seed as usize];
         let edges = if wrap { EdgeMode::Wrap } else { EdgeMode::Clamp };
         let s = Surface::new(generate(pattern, 24, 17), edges, scale);
-        let p = TraceParams { depth_scale: scale, edges, ..Default::default() };
+        let p = TraceParams::default();
         let ray = Ray::new(Vec2::new(u, v), Vec3::new(dx, dy, dz));
         for t in Technique::ALL {
             let hit = trace(&s, &ray, t, &p);
@@ -273,7 +269,7 @@ fn wall() -> HeightField {
 #[test]
 fn a_point_behind_a_wall_is_shadowed_and_one_in_front_is_lit() {
     let s = surface(wall(), EdgeMode::Clamp);
-    let p = params(EdgeMode::Clamp);
+    let p = TraceParams::default();
     // Receiver at depth 1, 6 texels left of the wall; light low from +u (behind the wall) or
     // from -u (in front).
     let uv = Vec2::new(24.5 / N as f32, 0.5);
@@ -297,7 +293,7 @@ fn a_point_behind_a_wall_is_shadowed_and_one_in_front_is_lit() {
 #[test]
 fn soft_shadow_lies_in_unit_range_and_lightens_with_blocker_distance() {
     let s = surface(wall(), EdgeMode::Clamp);
-    let p = TraceParams { min_samples: 64, max_samples: 64, ..params(EdgeMode::Clamp) };
+    let p = TraceParams { min_samples: 64, max_samples: 64, ..TraceParams::default() };
     let sp = ShadowParams { mode: ShadowMode::Soft, softness: 0.3 };
     // Light from +u at 45 degrees; receivers at depth 1 farther and farther left of the wall.
     let light = Vec3::new(1.0, 0.0, 1.0);
@@ -319,7 +315,7 @@ fn soft_shadow_lies_in_unit_range_and_lightens_with_blocker_distance() {
 fn exact_shadow_agrees_with_brute_force_over_random_points() {
     let f = generate(Pattern::Cobblestones, N, N);
     let s = surface(f.clone(), EdgeMode::Wrap);
-    let p = params(EdgeMode::Wrap);
+    let p = TraceParams::default();
     let sp = ShadowParams { mode: ShadowMode::Exact, ..Default::default() };
     let light = Vec3::new(0.7, -0.3, 0.5);
     let mut disagreements = 0;
@@ -366,7 +362,7 @@ fn lod_weight_fades_continuously_over_the_last_level() {
 #[test]
 fn one_sample_techniques_are_continuous_at_normal_incidence() {
     let s = surface(generate(Pattern::Pyramids, N, N), EdgeMode::Wrap);
-    let p = params(EdgeMode::Wrap);
+    let p = TraceParams::default();
     let uv = Vec2::new(0.3, 0.3);
     for t in [Technique::Parallax, Technique::Iterative, Technique::Exact, Technique::Pom] {
         let straight = trace(&s, &Ray::new(uv, Vec3::new(0.0, 0.0, -1.0)), t, &p);
@@ -391,7 +387,7 @@ fn huge_uvs_with_wrapping_edges_trace_as_the_same_ray_in_the_first_tile() {
     // brute-force search on that ray, and the hit's u is the entry's, to f32 precision.
     let f = cobblestones();
     let s = surface(f.clone(), EdgeMode::Wrap);
-    let p = params(EdgeMode::Wrap);
+    let p = TraceParams::default();
     let dir = Vec3::new(0.5, 0.2, -0.6);
     for u in [1e15f32, 3e14, -1e15, 1e30, f32::MAX] {
         let ray = Ray::new(Vec2::new(u, 0.3), dir);
@@ -433,7 +429,7 @@ fn exact_handles_rays_along_texel_walls_and_through_corners() {
     let f = cobblestones();
     for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
         let s = surface(f.clone(), edges);
-        let p = params(edges);
+        let p = TraceParams::default();
         for (uv, dir) in [
             (Vec2::new(0.3, 0.5), Vec3::new(0.5, -1e-7, -0.6)),
             (Vec2::new(0.5, 0.3), Vec3::new(-1e-7, 0.5, -0.6)),
@@ -456,7 +452,7 @@ fn direction_length_does_not_matter() {
     // (1e-30, 1e-30, -1e-30) overflowed or underflowed f32 normalization and returned the entry
     // point with no fetch. Scaled by a power of two the direction is exactly the same ray.
     let s = surface(cobblestones(), EdgeMode::Wrap);
-    let p = params(EdgeMode::Wrap);
+    let p = TraceParams::default();
     let uv = Vec2::new(0.3, 0.4);
     for unit in [Vec3::new(1.0, 1.0, -1.0), Vec3::new(0.5, 0.2, -0.6), Vec3::new(-0.9, 0.1, -0.05)] {
         for t in Technique::ALL {
@@ -499,11 +495,12 @@ fn direction_length_does_not_matter() {
 #[test]
 fn depth_scale_and_perspective_bias_are_bounded() {
     use pomkit_core::trace::{MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MIN_PERSPECTIVE_BIAS, TraceParamError};
+    use pomkit_core::trace::{check_depth_scale, sanitized_depth_scale};
     let ok = |p: TraceParams| p.validate().is_ok();
-    assert!(ok(TraceParams { depth_scale: MAX_DEPTH_SCALE, ..Default::default() }));
-    assert!(ok(TraceParams { depth_scale: 1e-6, ..Default::default() }));
+    assert!(check_depth_scale(MAX_DEPTH_SCALE).is_ok());
+    assert!(check_depth_scale(1e-6).is_ok());
     for bad in [16.001f32, 1e4, 1e14, 1e20, 1e30, f32::INFINITY] {
-        let e = TraceParams { depth_scale: bad, ..Default::default() }.validate().unwrap_err();
+        let e = check_depth_scale(bad).unwrap_err();
         assert_eq!(e, TraceParamError::DepthScale(bad));
         assert!(e.to_string().contains("depth_scale") && e.to_string().contains("at most 16"), "{e}");
     }
@@ -517,8 +514,15 @@ fn depth_scale_and_perspective_bias_are_bounded() {
     }
     // Sanitizing clamps to the same bounds, so a library caller who skips validation still
     // gets a bounded trace.
-    let p = TraceParams { depth_scale: 1e30, perspective_bias: 1e30, ..Default::default() }.sanitized();
-    assert_eq!((p.depth_scale, p.perspective_bias), (MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS));
+    let p = TraceParams { perspective_bias: 1e30, ..Default::default() }.sanitized();
+    assert_eq!(p.perspective_bias, MAX_PERSPECTIVE_BIAS);
+    assert_eq!(sanitized_depth_scale(1e30), MAX_DEPTH_SCALE);
+    // A surface is built for the sanitized depth scale whatever it is given; the default (the
+    // parameter table's) stands in for values that are no depth at all.
+    let field = generate(Pattern::Waves, 8, 8);
+    for (given, used) in [(1e30, MAX_DEPTH_SCALE), (f32::INFINITY, 0.1), (f32::NAN, 0.1), (-2.0, 0.1), (0.25, 0.25)] {
+        assert_eq!(Surface::new(field.clone(), EdgeMode::Wrap, given).depth_scale(), used, "{given}");
+    }
     let p = TraceParams { perspective_bias: -1.0, ..Default::default() }.sanitized();
     assert_eq!(p.perspective_bias, MIN_PERSPECTIVE_BIAS);
 }
@@ -529,7 +533,7 @@ fn exact_at_the_largest_depth_scale_still_matches_brute_force() {
     let f = cobblestones();
     let depth = pomkit_core::trace::MAX_DEPTH_SCALE;
     let s = Surface::new(f.clone(), EdgeMode::Wrap, depth);
-    let p = TraceParams { depth_scale: depth, ..params(EdgeMode::Wrap) };
+    let p = TraceParams::default();
     for ray in rays_over(3, 85.0, 13) {
         let hit = trace(&s, &ray, Technique::Exact, &p);
         let truth = brute_force(&f, EdgeMode::Wrap, &ray, f64::from(depth));
@@ -571,7 +575,7 @@ proptest! {
         let pattern = [Pattern::Cobblestones, Pattern::Spike, Pattern::Text, Pattern::Bricks][pattern];
         let edges = if wrap { EdgeMode::Wrap } else { EdgeMode::Clamp };
         let s = Surface::new(generate(pattern, 24, 17), edges, depth_scale);
-        let p = TraceParams { depth_scale, perspective_bias: bias, edges, ..Default::default() };
+        let p = TraceParams { perspective_bias: bias, ..Default::default() };
         let ray = Ray::new(Vec2::new(u, v), dir);
         // The light as a direction toward it: flip the view-style z so most rays go up.
         let light = Vec3::new(light.x, light.y, -light.z);
@@ -599,7 +603,7 @@ fn cone_matches_brute_force_on_analytic_fields_at_every_angle() {
             let s = surface(f.clone(), edges);
             for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
                 for ray in rays_over(24, angle, 7) {
-                    let hit = trace(&s, &ray, Technique::Cone, &params(edges));
+                    let hit = trace(&s, &ray, Technique::Cone, &TraceParams::default());
                     let truth = brute_force(&f, edges, &ray, 0.1);
                     let err = texels(hit.uv, on_ray(&ray, truth, 0.1));
                     assert!(
@@ -620,7 +624,7 @@ fn cone_finds_what_exact_finds_on_the_built_in_maps_at_grazing_angles() {
         [(Pattern::Bricks, EdgeMode::Wrap), (Pattern::Cobblestones, EdgeMode::Clamp), (Pattern::Text, EdgeMode::Wrap)]
     {
         let s = Surface::new(generate(pattern, 128, 128), edges, 0.1);
-        let p = params(edges);
+        let p = TraceParams::default();
         for angle in [75.0f32, 85.0, 89.0] {
             for ray in rays_over(300, angle, 11) {
                 let (a, b) = (trace(&s, &ray, Technique::Cone, &p), trace(&s, &ray, Technique::Exact, &p));
@@ -651,7 +655,7 @@ fn a_baked_cone_map_read_back_gives_the_same_hits() {
     let mut read = Surface::new(f, EdgeMode::Wrap, 0.1);
     read.set_cones(pomkit_core::cone::ConeMap::from_gray_alpha16(96, 96, EdgeMode::Wrap, &samples).unwrap()).unwrap();
     assert!(read.cones().relaxed() && !built.cones().relaxed());
-    let p = params(EdgeMode::Wrap);
+    let p = TraceParams::default();
     let (mut looked, mut plain) = (0, 0);
     for angle in [30.0f32, 75.0, 89.0] {
         for ray in rays_over(200, angle, 3) {
@@ -677,7 +681,7 @@ fn directional_cones_keep_cone_exact_and_cost_fewer_fetches() {
         let plain = Surface::new(f.clone(), edges, 0.1);
         let mut ahead = Surface::new(f.clone(), edges, 0.1);
         ahead.set_cones(pomkit_core::cone::ConeMap::directional(&f, edges)).unwrap();
-        let p = params(edges);
+        let p = TraceParams::default();
         let (mut a_fetches, mut p_fetches) = (0, 0);
         for angle in [30.0f32, 75.0, 85.0, 89.0] {
             for ray in rays_over(300, angle, 13) {
@@ -757,7 +761,7 @@ fn relaxed_cones_are_wider_and_cone_on_them_stays_close_to_exact() {
     }
     assert!(wider / n > 1.5, "relaxed cones only {:.2} times as wide on average", wider / n);
     relaxed.set_cones(cones).unwrap();
-    let p = TraceParams { binary_steps: 8, ..params(EdgeMode::Wrap) };
+    let p = TraceParams { binary_steps: 8, ..TraceParams::default() };
     for angle in [60.0f32, 75.0, 85.0] {
         let rays = rays_over(1000, angle, 17);
         let (mut fetches_r, mut fetches_c, mut over) = (0, 0, 0);

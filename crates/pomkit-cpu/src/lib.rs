@@ -33,7 +33,7 @@ use pomkit_core::mesh::{Mesh, tangent_ray};
 use pomkit_core::scene::{Light, Material, NormalMap, Scene, Texture};
 use pomkit_core::shadow::{ShadowMode, lod_weight, shadow};
 use pomkit_core::silhouette::{trace_curved, vertex_curvature, view_curvature};
-use pomkit_core::trace::{Ray, Surface, Technique, TraceParams, trace};
+use pomkit_core::trace::{Ray, Surface, Technique, TraceParams, sanitized_depth_scale, trace};
 use pomkit_core::{EdgeMode, mip_level_from_gradients};
 use rayon::prelude::*;
 
@@ -52,6 +52,9 @@ struct Prepared {
     albedo: Vec<Texture>,
     technique: Technique,
     params: TraceParams,
+    /// The material's depth scale, sanitized ([`pomkit_core::trace::sanitized_depth_scale`]).
+    depth_scale: f32,
+    edges: EdgeMode,
 }
 
 /// Texel count and mip count for gradient-based level selection.
@@ -144,15 +147,12 @@ impl CpuRenderer {
         for (oi, obj) in scene.objects.iter().enumerate() {
             let prep = &prepared[obj.material];
             let mesh: Arc<Mesh> = match (opts.mode, &prep.material.height) {
-                (Mode::Displaced, Some(field)) => {
-                    let p = &prep.params;
-                    Arc::new(obj.mesh.try_displaced_for_shading(
-                        field,
-                        p.edges,
-                        p.depth_scale,
-                        opts.displaced_edge_texels,
-                    )?)
-                }
+                (Mode::Displaced, Some(field)) => Arc::new(obj.mesh.try_displaced_for_shading(
+                    field,
+                    prep.edges,
+                    prep.depth_scale,
+                    opts.displaced_edge_texels,
+                )?),
                 _ => obj.mesh.clone(),
             };
             let world = mesh.transformed(obj.transform);
@@ -165,7 +165,7 @@ impl CpuRenderer {
                     let p = world.positions[i];
                     let uv = world.uvs[i];
                     let depth = match (&prep.surface, displaced) {
-                        (Some(s), true) => s.field().sample_bilinear(uv, prep.params.edges),
+                        (Some(s), true) => s.field().sample_bilinear(uv, prep.edges),
                         _ => 0.0,
                     };
                     ClipVertex {
@@ -316,8 +316,9 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
         .map(|m| {
             let technique = opts.mode.technique(m.technique);
             let params = m.trace.sanitized();
+            let (depth_scale, edges) = (sanitized_depth_scale(m.depth_scale), m.edges);
             let surface = m.height.as_ref().map(|f| {
-                let mut surface = Surface::new((**f).clone(), params.edges, params.depth_scale);
+                let mut surface = Surface::new((**f).clone(), edges, depth_scale);
                 // The material's own cones or the field's, built once (not inside the first
                 // pixel's trace nor again for the next frame); either fits the field.
                 if technique == Technique::Cone
@@ -333,9 +334,9 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
                     // The normal map that matches the geometry: the full depth spans
                     // depth_scale * width texels.
                     let o = NormalBakeOptions {
-                        scale: params.depth_scale * f.width() as f32,
+                        scale: depth_scale * f.width() as f32,
                         filter: NormalFilter::Central,
-                        edges: params.edges,
+                        edges,
                         y_down: false,
                     };
                     bake_normals(f, &o).ok().and_then(|n| NormalMap::new(f.width(), f.height(), n)).map(Arc::new)
@@ -347,7 +348,7 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
                 let next = last.downsample();
                 albedo.push(next);
             }
-            Prepared { material: m.clone(), surface, normals, albedo, technique, params }
+            Prepared { material: m.clone(), surface, normals, albedo, technique, params, depth_scale, edges }
         })
         .collect()
 }
@@ -507,7 +508,7 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
     let tangent = Vec4::new(t.x, t.y, t.z, sign);
     let to_eye = (cam.eye - v.world).try_normalize().unwrap_or(n);
     let params = prep.params;
-    let edges = params.edges;
+    let edges = prep.edges;
 
     // Mip level of the height map from the quad's UV gradients, fixed before any loop.
     let (lod, weight) = match &prep.surface {
@@ -533,7 +534,7 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
         let p = TraceParams { lod, ..params };
         let ray = Ray::new(v.uv, dir);
         let hit = if silhouettes(prep) {
-            let c = view_curvature(-to_eye, n, tangent, v.curvature, params.depth_scale);
+            let c = view_curvature(-to_eye, n, tangent, v.curvature, prep.depth_scale);
             let curved = trace_curved(surface, &ray, prep.technique, &p, c);
             if curved.left {
                 return None;
@@ -615,7 +616,7 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
     let mut z = f.z;
     if m.pixel_depth_offset && ray_depth > 0.0 && weight > 0.0 && prep.technique.displaces() {
         let l_world = (v.uv_scale.x * v.uv_scale.y).max(0.0).sqrt();
-        let down = ray_depth * params.depth_scale * l_world; // world depth below the polygon
+        let down = ray_depth * prep.depth_scale * l_world; // world depth below the polygon
         let cos = to_eye.dot(n).max(1e-3);
         let p = v.world - to_eye * (down / cos);
         let aspect_free = cam.projection(1.0) * cam.view(); // depth does not depend on aspect
@@ -670,8 +671,7 @@ mod tests {
             let m = &scene.materials[obj.material];
             let mesh = match &m.height {
                 Some(f) => {
-                    let p = m.trace.sanitized();
-                    obj.mesh.try_displaced_for_shading(f, p.edges, p.depth_scale, opts.displaced_edge_texels).unwrap()
+                    obj.mesh.try_displaced_for_shading(f, m.edges, m.depth_scale, opts.displaced_edge_texels).unwrap()
                 }
                 None => (*obj.mesh).clone(),
             };

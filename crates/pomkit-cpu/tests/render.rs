@@ -30,14 +30,9 @@ fn material(field: HeightField, technique: Technique, depth_scale: f32) -> Mater
         technique,
         base_color: Vec3::ONE,
         specular: 0.0,
-        trace: TraceParams {
-            depth_scale,
-            edges: EdgeMode::Clamp,
-            min_samples: 32,
-            max_samples: 96,
-            refine: 3,
-            ..Default::default()
-        },
+        depth_scale,
+        edges: EdgeMode::Clamp,
+        trace: TraceParams { min_samples: 32, max_samples: 96, refine: 3, ..Default::default() },
         shadow: ShadowParams { mode: ShadowMode::None, ..Default::default() },
         ..Material::default()
     }
@@ -183,7 +178,7 @@ fn uvs_mirrored_in_v_use_the_handedness_for_the_bitangent() {
 fn plane_at(angle: f32, technique: Technique) -> (Scene, Camera) {
     let field = generate(Pattern::Cobblestones, 64, 64);
     let mut m = material(field, technique, 0.06);
-    m.trace.edges = EdgeMode::Wrap;
+    m.edges = EdgeMode::Wrap;
     m.albedo = None;
     m.lod_threshold = 99.0;
     let a = angle.to_radians();

@@ -144,8 +144,13 @@ pub struct PomkitParams {
     pub technique: Technique,
     /// The self-shadow mode and soft-shadow penumbra.
     pub shadow: ShadowParams,
-    /// The tracing parameters (samples, depth scale, edge mode, ...).
+    /// The tracing parameters (sample counts, refinement steps, perspective bias).
     pub trace: TraceParams,
+    /// How far below the polygon, in UV units, the deepest point lies ([`Material::depth_scale`]).
+    pub depth_scale: f32,
+    /// Texture addressing: the tracers' wrap or clamp arithmetic, which must match the
+    /// sampler's address mode ([`crate::util::trilinear_sampler`]).
+    pub edges: EdgeMode,
     /// Mip level up to which the full technique runs (Tatarchuk 2006's LOD fade).
     pub lod_threshold: f32,
 }
@@ -154,8 +159,9 @@ impl PomkitParams {
     /// Bytes of the WGSL struct.
     pub const SIZE: u64 = 64;
 
-    /// Checked parameters: `trace` as [`TraceParams::validate`] accepts it, a finite softness
-    /// and LOD threshold.
+    /// Checked parameters: `trace` as [`TraceParams::validate`] accepts it, a depth scale as
+    /// [`pomkit_core::trace::check_depth_scale`] accepts it, a finite softness and LOD
+    /// threshold.
     ///
     /// # Errors
     /// [`ParamError`] naming the first parameter that is not finite or out of range.
@@ -163,10 +169,12 @@ impl PomkitParams {
         technique: Technique,
         shadow: ShadowParams,
         trace: TraceParams,
+        depth_scale: f32,
+        edges: EdgeMode,
         lod_threshold: f32,
     ) -> Result<Self, ParamError> {
         for (name, value) in [
-            ("depth_scale", trace.depth_scale),
+            ("depth_scale", depth_scale),
             ("perspective_bias", trace.perspective_bias),
             ("softness", shadow.softness),
             ("lod_threshold", lod_threshold),
@@ -175,11 +183,12 @@ impl PomkitParams {
                 return Err(ParamError::NotFinite { name, value });
             }
         }
+        pomkit_core::trace::check_depth_scale(depth_scale)?;
         trace.validate()?;
         if shadow.softness < 0.0 {
             return Err(ParamError::Softness(shadow.softness));
         }
-        Ok(Self { technique, shadow, trace, lod_threshold })
+        Ok(Self { technique, shadow, trace, depth_scale, edges, lod_threshold })
     }
 
     /// The parameters of a pomkit material drawn with `technique`, sanitized as the renderers
@@ -190,6 +199,8 @@ impl PomkitParams {
             technique,
             shadow: material.shadow,
             trace: material.trace.sanitized(),
+            depth_scale: pomkit_core::trace::sanitized_depth_scale(material.depth_scale),
+            edges: material.edges,
             lod_threshold: material.lod_threshold,
         }
     }
@@ -214,14 +225,14 @@ impl PomkitParams {
         let mut u = Std140::new();
         u.named("technique", 4).u(technique_index(self.technique));
         u.named("shadow_mode", 4).u(shadow_index(self.shadow.mode));
-        u.named("edges", 4).u(edges_index(p.edges));
+        u.named("edges", 4).u(edges_index(self.edges));
         u.named("min_samples", 4).u(p.min_samples);
         u.named("max_samples", 4).u(p.max_samples);
         u.named("samples", 4).u(p.samples);
         u.named("iterations", 4).u(p.iterations);
         u.named("binary_steps", 4).u(p.binary_steps);
         u.named("refine", 4).u(p.refine);
-        u.named("depth_scale", 4).f(p.depth_scale);
+        u.named("depth_scale", 4).f(pomkit_core::trace::sanitized_depth_scale(self.depth_scale));
         u.named("perspective_bias", 4).f(p.perspective_bias);
         u.named("softness", 4).f(softness);
         u.named("lod_threshold", 4).f(lod_threshold);

@@ -12,6 +12,7 @@
 //!
 //! ```no_run
 //! use glam::{Vec2, Vec3};
+//! use pomkit_core::EdgeMode;
 //! use pomkit_core::trace::{Ray, Technique, TraceParams};
 //! use pomkit_core::shadow::ShadowParams;
 //! use pomkit_gpu::GpuContext;
@@ -27,7 +28,9 @@
 //! ctx.queue.submit([encoder.finish()]);
 //!
 //! let probe = RayProbe::new(&ctx.device)?;
-//! let params = PomkitParams::new(Technique::Pom, ShadowParams::default(), TraceParams::default(), f32::MAX)
+//! // The depth scale and edges the maps were built with (HeightPassOptions::default()).
+//! let (trace, shadow) = (TraceParams::default(), ShadowParams::default());
+//! let params = PomkitParams::new(Technique::Pom, shadow, trace, 0.1, EdgeMode::Wrap, f32::MAX)
 //!     .expect("valid parameters");
 //! let ray = Ray::new(Vec2::new(0.25, 0.5), Vec3::new(0.5, 0.0, -0.8));
 //! let hits = probe.trace(&ctx, &maps, &params, &[ProbeRay::new(&ray, 0.0)])?;
@@ -214,8 +217,8 @@ impl RayProbe {
     /// library counts them).
     ///
     /// `maps` must have been built ([`crate::height::HeightPasses::encode`]) with the edge mode
-    /// and depth scale of `params.trace` (the pyramid and the parallax map depend on them); the
-    /// sampler's address mode is taken from `params.trace.edges`.
+    /// and depth scale of `params` (the pyramid and the parallax map depend on them); the
+    /// sampler's address mode is taken from `params.edges`.
     ///
     /// # Errors
     /// [`ProbeError::NotFinite`] naming the first ray with a NaN or infinite number;
@@ -345,7 +348,7 @@ impl RayProbe {
             contents: &params.to_bytes(),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let sampler = match params.trace.edges {
+        let sampler = match params.edges {
             EdgeMode::Wrap => &self.repeat,
             EdgeMode::Clamp => &self.clamp,
         };

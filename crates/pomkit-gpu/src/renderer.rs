@@ -157,7 +157,6 @@ impl GpuRenderer {
         let mut objects = Vec::with_capacity(scene.objects.len());
         for obj in &scene.objects {
             let m = &scene.materials[obj.material];
-            let p = m.trace.sanitized();
             let displaced = opts.mode == Mode::Displaced && m.height.is_some();
             let mesh = match (displaced, &m.height) {
                 (true, Some(field)) => {
@@ -170,14 +169,14 @@ impl GpuRenderer {
                     )
                     .map_err(|e| GpuError::Unsupported(e.to_string()))?;
                     obj.mesh
-                        .try_displaced_for_shading(field, p.edges, p.depth_scale, opts.displaced_edge_texels)
+                        .try_displaced_for_shading(field, m.edges, m.depth_scale, opts.displaced_edge_texels)
                         .map_err(|e| GpuError::Unsupported(e.to_string()))?
                 }
                 _ => (*obj.mesh).clone(),
             };
             let world = mesh.transformed(obj.transform);
             let depths: Option<Vec<f32>> = match (&m.height, displaced) {
-                (Some(field), true) => Some(world.uvs.iter().map(|&uv| field.sample_bilinear(uv, p.edges)).collect()),
+                (Some(field), true) => Some(world.uvs.iter().map(|&uv| field.sample_bilinear(uv, m.edges)).collect()),
                 _ => None,
             };
             check_mesh(&ctx.device.limits(), &obj.name, world.positions.len() as u64, world.indices.len() as u64)?;

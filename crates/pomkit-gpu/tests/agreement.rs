@@ -155,14 +155,9 @@ fn one_object(mesh: Mesh, field: HeightField, technique: Technique, camera: Came
         technique,
         base_color: Vec3::ONE,
         specular: 0.0,
-        trace: TraceParams {
-            depth_scale: 0.05,
-            edges: EdgeMode::Clamp,
-            min_samples: 32,
-            max_samples: 96,
-            refine: 3,
-            ..Default::default()
-        },
+        depth_scale: 0.05,
+        edges: EdgeMode::Clamp,
+        trace: TraceParams { min_samples: 32, max_samples: 96, refine: 3, ..Default::default() },
         shadow: ShadowParams { mode: ShadowMode::None, ..Default::default() },
         ..Material::default()
     };
@@ -243,7 +238,7 @@ fn dynamic_height_field_matches_the_cpu_frame_after_frame() {
     let cam = Camera { eye: Vec3::new(0.0, 1.6, 1.6), target: Vec3::ZERO, fov_y_deg: 40.0, ..Camera::default() };
     let mesh = Mesh::plane(Vec2::splat(2.0), 1);
     let mut scene = one_object(mesh, ripple(0), Technique::Pom, cam, Vec3::new(0.6, 0.5, 0.2));
-    scene.materials[0].trace.depth_scale = 0.06;
+    scene.materials[0].depth_scale = 0.06;
     scene.materials[0].shadow = ShadowParams { mode: ShadowMode::Soft, softness: 0.1 };
     scene.ambient = Vec3::splat(0.1);
     let o = opts(160, 120, Mode::Material);
@@ -308,7 +303,7 @@ fn bad_input_is_an_error_not_a_panic() {
     dangling.objects[0].material = 9;
     assert!(err(&dangling, &o).is_some_and(|e| e.contains("material 9")));
     let mut nan = scene.clone();
-    nan.materials[0].trace.depth_scale = f32::NAN;
+    nan.materials[0].depth_scale = f32::NAN;
     assert!(err(&nan, &o).is_some_and(|e| e.contains("depth_scale")));
     // Huge sample counts are clamped, not hung on.
     let mut huge = scene.clone();
@@ -367,7 +362,7 @@ fn given_relaxed_cones_render_alike_on_both_sides() {
     assert_agree(&gpu_exact, &cpu_exact, "conservative cones");
     for m in &mut scene.materials {
         if let Some(field) = &m.height {
-            m.cones = Some(Arc::new(pomkit_core::cone::ConeMap::relaxed_cones(field, m.trace.sanitized().edges)));
+            m.cones = Some(Arc::new(pomkit_core::cone::ConeMap::relaxed_cones(field, m.edges)));
         }
     }
     let (gpu_out, cpu_out) = (render_gpu(g, &scene, &o), render_cpu(&scene, &o));
@@ -410,7 +405,7 @@ fn cones_come_back_with_set_cones_after_a_new_height_field() {
     let cpu_exact = render_cpu(&next, &opts(160, 120, Mode::Technique(Technique::Exact)));
     gs.set_height(r.context(), 0, &field).expect("same size");
     let without = r.draw(&mut gs, &next).expect("draw");
-    let edges = next.materials[0].trace.sanitized().edges;
+    let edges = next.materials[0].edges;
     gs.set_cones(r.context(), 0, Some(&pomkit_core::cone::ConeMap::conservative(&field, edges))).expect("they fit");
     let with = r.draw(&mut gs, &next).expect("draw");
     let (f_cone, f_exact, f_without, f_with) =

@@ -70,16 +70,15 @@ fn exact_and_cone_on_the_gpu_match_brute_force_on_analytic_fields_at_every_angle
         for (name, field) in analytic_fields(N) {
             let field = f16_surface(&field);
             let maps = upload(&ctx, &passes, &field, edges, edges == EdgeMode::Clamp);
-            let trace = TraceParams { edges, depth_scale: DEPTH_SCALE, ..Default::default() };
             for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
                 let rays = ray_set(angle, 24, 7);
                 let truth: Vec<f64> =
                     rays.iter().map(|r| brute_force_depth(&field, edges, r, f64::from(DEPTH_SCALE))).collect();
                 let probe_rays: Vec<ProbeRay> = rays.iter().map(|r| ProbeRay::new(r, 0.0)).collect();
                 for (k, t) in [Technique::Exact, Technique::Cone].into_iter().enumerate() {
-                    let params =
-                        PomkitParams::new(t, ShadowParams { mode: ShadowMode::None, softness: 0.1 }, trace, f32::MAX)
-                            .expect("valid parameters");
+                    let shadow = ShadowParams { mode: ShadowMode::None, softness: 0.1 };
+                    let params = PomkitParams::new(t, shadow, TraceParams::default(), DEPTH_SCALE, edges, f32::MAX)
+                        .expect("valid parameters");
                     let hits = probe.trace(&ctx, &maps, &params, &probe_rays).expect("the probe runs");
                     for ((ray, hit), &z) in rays.iter().zip(&hits).zip(&truth) {
                         let err = f64::from(((hit.uv - on_ray(ray, z)) * N as f32).length());

@@ -44,8 +44,8 @@ fn rounded(field: &HeightField) -> HeightField {
 }
 
 /// The trace parameters: the defaults, with pom's secant refinement on so that it is compared too.
-fn trace_params(edges: EdgeMode) -> TraceParams {
-    TraceParams { refine: 3, edges, ..TraceParams::default() }
+fn trace_params() -> TraceParams {
+    TraceParams { refine: 3, ..TraceParams::default() }
 }
 
 /// One surface on both sides: the CPU's, from the f16-rounded field, and the GPU's textures.
@@ -58,19 +58,19 @@ struct Both {
 
 fn surface(ctx: &GpuContext, passes: &HeightPasses, pattern: Pattern, edges: EdgeMode) -> Both {
     let field = rounded(&generate(pattern, SIZE, SIZE));
-    let params = trace_params(edges);
+    let params = trace_params();
+    let depth_scale = pomkit_core::scene::Material::default().depth_scale;
     let maps = HeightMaps::new(ctx, SIZE, SIZE, pattern.name()).expect("a 256x256 map fits");
     maps.upload_depths(ctx, field.depths()).expect("one depth per texel");
     // The cones of the surface both sides trace: with wrap edges the CPU's, as the renderer
     // writes them; with clamp edges built on the GPU (HeightPassOptions::build_cones), as a
     // dynamic field gets them, so `cone`'s rays also check the GPU build.
-    let cpu = Surface::new(field, edges, params.depth_scale);
+    let cpu = Surface::new(field, edges, depth_scale);
     let build_cones = edges == EdgeMode::Clamp;
     if !build_cones {
         maps.write_cones(&ctx.queue, Some(cpu.cones())).expect("the cones fit");
     }
-    let opts =
-        HeightPassOptions { edges, depth_scale: params.depth_scale, build_cones, ..HeightPassOptions::default() };
+    let opts = HeightPassOptions { edges, depth_scale, build_cones, ..HeightPassOptions::default() };
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     passes.encode(&ctx.device, &mut encoder, &maps, &opts, None);
     ctx.queue.submit([encoder.finish()]);
@@ -404,8 +404,10 @@ fn clamp_set() -> RaySet {
 // Running both sides
 // ---------------------------------------------------------------------------------------------
 
-fn pomkit_params(t: Technique, mode: ShadowMode, trace: TraceParams) -> PomkitParams {
-    PomkitParams::new(t, ShadowParams { mode, softness: 0.1 }, trace, f32::MAX).expect("valid parameters")
+/// The uniform of `s`'s surface and trace parameters, with no LOD fade.
+fn pomkit_params(t: Technique, mode: ShadowMode, s: &Both) -> PomkitParams {
+    let shadow = ShadowParams { mode, softness: 0.1 };
+    PomkitParams::new(t, shadow, s.params, s.cpu.depth_scale(), s.cpu.edges(), f32::MAX).expect("valid parameters")
 }
 
 fn probe_rays(rays: &[Ray]) -> Vec<ProbeRay> {
@@ -414,9 +416,8 @@ fn probe_rays(rays: &[Ray]) -> Vec<ProbeRay> {
 
 /// Both sides' hits of `t` for `rays` on `s`.
 fn trace_both(ctx: &GpuContext, probe: &RayProbe, s: &Both, t: Technique, rays: &[Ray]) -> (Vec<Hit>, Vec<Hit>) {
-    let gpu = probe
-        .trace(ctx, &s.gpu, &pomkit_params(t, ShadowMode::None, s.params), &probe_rays(rays))
-        .expect("the probe runs");
+    let gpu =
+        probe.trace(ctx, &s.gpu, &pomkit_params(t, ShadowMode::None, s), &probe_rays(rays)).expect("the probe runs");
     let cpu = par_map(rays, |r| trace(&s.cpu, r, t, &s.params));
     (gpu, cpu)
 }
@@ -428,7 +429,7 @@ fn compare_sets(ctx: &GpuContext, probe: &RayProbe, s: &Both, sets: &[RaySet], t
         for t in Technique::ALL {
             let start = std::time::Instant::now();
             let (gpu, cpu) = trace_both(ctx, probe, s, t, &set.rays);
-            let stats = TraceStats::new(&set.rays, &gpu, &cpu, s.params.edges);
+            let stats = TraceStats::new(&set.rays, &gpu, &cpu, s.cpu.edges());
             let name = format!("{}, {}", s.name, set.name);
             writeln!(table, "{}", stats.row(&name, t)).unwrap();
             if std::env::var_os("PROBE_TIMES").is_some() {
@@ -507,8 +508,7 @@ fn curved_violations(
 ) -> Vec<String> {
     let mut failures = Vec::new();
     let pr: Vec<(ProbeRay, f32)> = curved.iter().map(|(r, c)| (ProbeRay::new(r, 0.0), *c)).collect();
-    let gpu =
-        probe.trace_curved(ctx, &s.gpu, &pomkit_params(t, ShadowMode::None, s.params), &pr).expect("the probe runs");
+    let gpu = probe.trace_curved(ctx, &s.gpu, &pomkit_params(t, ShadowMode::None, s), &pr).expect("the probe runs");
     let cpu = par_map(curved, |(r, c)| trace_curved(&s.cpu, r, t, &s.params, *c));
     let left_differs = gpu.iter().zip(&cpu).filter(|(g, c)| g.1 != c.left).count();
     let left = cpu.iter().filter(|c| c.left).count();
@@ -524,7 +524,7 @@ fn curved_violations(
     let kept_rays: Vec<Ray> = kept.iter().map(|&i| curved[i].0).collect();
     let g: Vec<Hit> = kept.iter().map(|&i| gpu[i].0).collect();
     let c: Vec<Hit> = kept.iter().map(|&i| cpu[i].hit).collect();
-    let stats = TraceStats::new(&kept_rays, &g, &c, s.params.edges);
+    let stats = TraceStats::new(&kept_rays, &g, &c, s.cpu.edges());
     writeln!(table, "{}", stats.row(&name, t)).unwrap();
     for v in trace_violations(t, &stats, set) {
         let (e, ray, g, c) = stats.worst.expect("at least one ray");
@@ -589,7 +589,7 @@ fn shadow_queries(s: &Both) -> Vec<ShadowQuery> {
     let mut rng = SplitMix64::new(9);
     let mut rays = ray_set(45.0, RAYS / 2, 11);
     rays.extend(ray_set(75.0, RAYS / 2, 12));
-    if s.params.edges == EdgeMode::Wrap {
+    if s.cpu.edges() == EdgeMode::Wrap {
         rays.extend(
             ray_set(75.0, RAYS / 4, 13).into_iter().map(|r| Ray::new(r.uv + Vec2::new(1000.0, -3000.0), r.dir)),
         );
@@ -642,7 +642,7 @@ fn every_shadow_mode_shadows_as_core_does() {
         let s = surface(&ctx, &passes, pattern, edges);
         let queries = shadow_queries(&s);
         for mode in [ShadowMode::Hard, ShadowMode::Soft, ShadowMode::Exact, ShadowMode::Depth] {
-            let params = pomkit_params(Technique::Exact, mode, s.params);
+            let params = pomkit_params(Technique::Exact, mode, &s);
             let gpu = probe.shadow(&ctx, &s.gpu, &params, &queries).expect("the probe runs");
             let sp = ShadowParams { mode, softness: 0.1 };
             let cpu: Vec<Shadow> = par_map(&queries, |q| shadow(&s.cpu, q.uv, q.depth, q.light, &sp, &s.params));
@@ -757,7 +757,7 @@ fn non_finite_input_is_refused() {
     let passes = HeightPasses::new(&ctx.device);
     let probe = RayProbe::new(&ctx.device).expect("the probe compiles");
     let s = surface(&ctx, &passes, Pattern::Bricks, EdgeMode::Wrap);
-    let params = pomkit_params(Technique::Pom, ShadowMode::Hard, s.params);
+    let params = pomkit_params(Technique::Pom, ShadowMode::Hard, &s);
     let good = ProbeRay { uv: Vec2::splat(0.5), dir: Vec3::new(0.5, 0.0, -0.8), lod: 0.0 };
     let bad = ProbeRay { dir: Vec3::new(f32::NAN, 0.0, -1.0), ..good };
     let e = probe.trace(&ctx, &s.gpu, &params, &[good, bad]).unwrap_err();
@@ -781,10 +781,10 @@ fn relaxed_cones_trace_as_core_does() {
     let passes = HeightPasses::new(&ctx.device);
     let probe = RayProbe::new(&ctx.device).expect("the probe compiles");
     let mut s = surface(&ctx, &passes, Pattern::Cobblestones, EdgeMode::Wrap);
-    let relaxed = std::sync::Arc::new(pomkit_core::cone::ConeMap::relaxed_cones(s.cpu.field(), s.params.edges));
+    let relaxed = std::sync::Arc::new(pomkit_core::cone::ConeMap::relaxed_cones(s.cpu.field(), s.cpu.edges()));
     s.cpu.set_cones(relaxed.clone()).expect("the cones fit");
     s.gpu.write_cones(&ctx.queue, Some(&relaxed)).expect("the cones fit");
-    let opts = HeightPassOptions { edges: s.params.edges, depth_scale: s.params.depth_scale, ..Default::default() };
+    let opts = HeightPassOptions { edges: s.cpu.edges(), depth_scale: s.cpu.depth_scale(), ..Default::default() };
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     passes.encode(&ctx.device, &mut encoder, &s.gpu, &opts, None);
     ctx.queue.submit([encoder.finish()]);
@@ -794,7 +794,7 @@ fn relaxed_cones_trace_as_core_does() {
     for angle in [30.0, 60.0, 75.0, 85.0] {
         let rays = ray_set(angle, RAYS, 7);
         let (gpu, cpu) = trace_both(&ctx, &probe, &s, Technique::Cone, &rays);
-        let stats = TraceStats::new(&rays, &gpu, &cpu, s.params.edges);
+        let stats = TraceStats::new(&rays, &gpu, &cpu, s.cpu.edges());
         let name = format!("{}, relaxed cones, {angle} deg", s.name);
         writeln!(table, "\n{}", stats.row(&name, Technique::Cone)).unwrap();
         let (over, ratio) = (stats.share_over(RELAXED_UV), stats.fetch_ratio());

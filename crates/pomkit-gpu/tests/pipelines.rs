@@ -349,11 +349,14 @@ fn set_params_equals_a_rebuilt_material() {
     assert!(p < 40.0, "the change did not show: {p:.1} dB from before");
 
     let mut clamp = PomkitParams::from_material(&after, Technique::Relief);
-    clamp.trace.edges = EdgeMode::Clamp;
+    clamp.edges = EdgeMode::Clamp;
     assert_eq!(changed.set_params(&g.ctx, &clamp), Err(ParamError::EdgesChanged));
-    let bad = pomkit_core::trace::TraceParams { depth_scale: f32::NAN, ..Default::default() };
-    let e = PomkitParams::new(Technique::Pom, Default::default(), bad, 4.0).expect_err("NaN depth scale");
+    let (shadow, trace) = (Default::default(), Default::default());
+    let e =
+        PomkitParams::new(Technique::Pom, shadow, trace, f32::NAN, EdgeMode::Wrap, 4.0).expect_err("NaN depth scale");
     assert!(e.to_string().contains("depth_scale is NaN"), "{e}");
+    let e = PomkitParams::new(Technique::Pom, shadow, trace, 17.0, EdgeMode::Wrap, 4.0).expect_err("too deep");
+    assert!(e.to_string().contains("depth_scale is 17"), "{e}");
 }
 
 /// What a host can get wrong is an error value naming the problem, never a wgpu panic.
@@ -463,7 +466,7 @@ fn material_on_a_host_height_texture_equals_the_material_on_the_field() {
     assert!(p >= 60.0, "the host texture's material differs: {p:.1} dB");
     assert_eq!(x.depth, y.depth, "pixel depth offset differs");
 
-    mat.trace.edges = EdgeMode::Clamp;
+    mat.edges = EdgeMode::Clamp;
     let e = GpuMaterial::with_height_resource(&g.ctx, &g.pipelines, &mat, Technique::Exact, &resource, None)
         .err()
         .expect("edge modes differ");
@@ -485,7 +488,7 @@ fn a_cone_material_keeps_its_cones_in_step_with_its_heights() {
     let g = g.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let m = material(Technique::Cone, 0.08, false);
     let field = m.height.clone().expect("a height map");
-    let edges = m.trace.edges;
+    let edges = m.edges;
     let gm = new_material(&g, &m);
     // Built on the CPU from the material's heights.
     let cpu = pomkit_core::cone::ConeMap::conservative(&field, edges);

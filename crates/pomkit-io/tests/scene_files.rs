@@ -157,10 +157,10 @@ fn complete_scene_loads_every_field_as_written() {
     assert_eq!(m.name, "bricks");
     assert_eq!(m.base_color, Vec3::new(0.9, 0.8, 0.7));
     assert_eq!(m.technique, Technique::Relief);
+    assert_eq!((m.depth_scale, m.edges), (0.08, EdgeMode::Clamp));
     assert_eq!(
         m.trace,
         TraceParams {
-            depth_scale: 0.08,
             min_samples: 4,
             max_samples: 48,
             samples: 24,
@@ -168,7 +168,6 @@ fn complete_scene_loads_every_field_as_written() {
             binary_steps: 8,
             refine: 2,
             perspective_bias: 0.5,
-            edges: EdgeMode::Clamp,
             ..TraceParams::default()
         }
     );
@@ -691,7 +690,7 @@ fn a_scene_cache_loads_each_file_once_until_cleared() {
     assert_eq!(cache.len(), 2, "the height and albedo maps (built-in shapes are not cached)");
     // An edit of a number reuses the loaded maps.
     let b = parse_scene_cached(&text(0.05), &file, dir.path(), &mut cache).unwrap();
-    assert_eq!(b.materials[0].trace.depth_scale, 0.05);
+    assert_eq!(b.materials[0].depth_scale, 0.05);
     assert!(Arc::ptr_eq(a.materials[0].height.as_ref().unwrap(), b.materials[0].height.as_ref().unwrap()));
     assert!(Arc::ptr_eq(a.materials[0].albedo.as_ref().unwrap(), b.materials[0].albedo.as_ref().unwrap()));
     // A changed file is picked up after clear().

@@ -460,7 +460,7 @@ mod tests {
         let doc = SceneDoc::default();
         assert_eq!(doc.material_names(), ["bricks"]);
         let scene = doc.build(&mut SceneCache::default()).expect("default scene");
-        assert_eq!(scene.materials[0].trace.depth_scale, 0.06);
+        assert_eq!(scene.materials[0].depth_scale, 0.06);
         assert_eq!(scene.objects.len(), 1);
         let again = SceneDoc::from_text(&doc.to_toml(), Path::new("/elsewhere")).expect("round trip");
         assert_eq!(again, doc);

@@ -1094,7 +1094,7 @@ mod tests {
         let displaced = base.displaced(&field, EdgeMode::Clamp, depth_scale, 2.0);
         assert_valid(&displaced);
         let surface = Surface::new(field, EdgeMode::Clamp, depth_scale);
-        let params = TraceParams { depth_scale, edges: EdgeMode::Clamp, ..TraceParams::default() };
+        let params = TraceParams::default();
         let eye = xf.transform_point3(Vec3::new(0.7, 3.0, 1.2));
         for target in [Vec3::new(0.0, 0.0, 0.0), Vec3::new(-0.6, 0.0, 0.2), Vec3::new(0.8, 0.0, -0.3)] {
             let target = xf.transform_point3(target);

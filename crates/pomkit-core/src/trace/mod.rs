@@ -198,8 +198,8 @@ impl Technique {
             Technique::PomClassic => 8,
             Technique::Pom => p.max_samples + 1 + p.refine,
             Technique::Relief => p.samples + p.binary_steps,
-            Technique::Exact => surface.exact_fetch_bound(p.depth_scale),
-            Technique::Cone => surface.cone_fetch_bound(p.depth_scale, p.binary_steps),
+            Technique::Exact => surface.exact_fetch_bound(),
+            Technique::Cone => surface.cone_fetch_bound(p.binary_steps),
         }
     }
 }
@@ -237,9 +237,6 @@ impl std::str::FromStr for Technique {
 /// Parameters shared by the techniques (the command line's technique options).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TraceParams {
-    /// How far below the surface, in UV units, the deepest point lies: greater than 0 and at
-    /// most [`MAX_DEPTH_SCALE`]. Default 0.1.
-    pub depth_scale: f32,
     /// `pom`: fewest samples (head-on). Default 8.
     pub min_samples: u32,
     /// `pom`: most samples (grazing). Default 32.
@@ -256,9 +253,6 @@ pub struct TraceParams {
     /// gives the exact parallax length; smaller values shorten the trace toward grazing angles
     /// (less shimmer, flatter relief). Default 1.
     pub perspective_bias: f32,
-    /// Edge mode to build the [`Surface`] with (default wrap). Tracing itself samples with the
-    /// surface's own mode, which [`Surface::new`] fixes; keep the two equal.
-    pub edges: EdgeMode,
     /// Mip level the sampling techniques read (fixed before the loop, from UV gradients).
     /// `exact` always works on mip 0. Default 0.
     pub lod: f32,
@@ -269,7 +263,6 @@ impl TraceParams {
     pub const DEFAULT: Self = {
         use crate::params as p;
         Self {
-            depth_scale: p::DEPTH_SCALE.default.f32(),
             min_samples: p::MIN_SAMPLES.default.u32(),
             max_samples: p::MAX_SAMPLES_PARAM.default.u32(),
             samples: p::SAMPLES_PARAM.default.u32(),
@@ -277,7 +270,6 @@ impl TraceParams {
             binary_steps: p::BINARY_STEPS.default.u32(),
             refine: p::REFINE.default.u32(),
             perspective_bias: p::PERSPECTIVE_BIAS.default.f32(),
-            edges: EdgeMode::Wrap,
             lod: 0.0,
         }
     };
@@ -326,14 +318,10 @@ impl TraceParams {
     /// Checks the parameters.
     ///
     /// # Errors
-    /// [`TraceParamError`] for a depth scale outside `(0, MAX_DEPTH_SCALE]` (or not finite), a
-    /// perspective bias outside `[MIN_PERSPECTIVE_BIAS, MAX_PERSPECTIVE_BIAS]`, a non-finite LOD,
+    /// [`TraceParamError`] for a perspective bias outside `[MIN_PERSPECTIVE_BIAS, MAX_PERSPECTIVE_BIAS]`, a non-finite LOD,
     /// or `min_samples > max_samples`. Sample counts above [`MAX_SAMPLES`] and of zero are not
     /// errors: they are clamped to `1..=MAX_SAMPLES`.
     pub fn validate(&self) -> Result<(), TraceParamError> {
-        if !(self.depth_scale > 0.0 && self.depth_scale <= MAX_DEPTH_SCALE) {
-            return Err(TraceParamError::DepthScale(self.depth_scale));
-        }
         if !(MIN_PERSPECTIVE_BIAS..=MAX_PERSPECTIVE_BIAS).contains(&self.perspective_bias) {
             return Err(TraceParamError::PerspectiveBias(self.perspective_bias));
         }
@@ -347,7 +335,7 @@ impl TraceParams {
     }
 
     /// The parameters with counts clamped to `1..=MAX_SAMPLES` (refine and binary steps to
-    /// `0..=64`), the depth scale to at most [`MAX_DEPTH_SCALE`], the perspective bias into
+    /// `0..=64`), the perspective bias into
     /// `[MIN_PERSPECTIVE_BIAS, MAX_PERSPECTIVE_BIAS]`, and non-finite or non-positive values
     /// replaced by defaults, so tracing never hangs or panics.
     #[must_use]
@@ -356,7 +344,6 @@ impl TraceParams {
         let c = |n: u32| n.clamp(1, MAX_SAMPLES);
         let max_samples = c(self.max_samples);
         Self {
-            depth_scale: sanitized_depth_scale(self.depth_scale),
             min_samples: c(self.min_samples).min(max_samples),
             max_samples,
             samples: c(self.samples),
@@ -368,24 +355,42 @@ impl TraceParams {
             } else {
                 d.perspective_bias
             },
-            edges: self.edges,
             lod: if self.lod.is_finite() { self.lod.max(0.0) } else { 0.0 },
         }
     }
 }
 
-/// `depth_scale` clamped to `(0, MAX_DEPTH_SCALE]`; NaN, infinite, zero and negative values give
-/// the default 0.1 (infinity too: it is no depth at all, not the deepest one).
-fn sanitized_depth_scale(depth_scale: f32) -> f32 {
-    if depth_scale.is_finite() && depth_scale > 0.0 { depth_scale.min(MAX_DEPTH_SCALE) } else { 0.1 }
+/// Checks a depth scale (a material's, or the one a [`Surface`] is built for).
+///
+/// # Errors
+/// [`TraceParamError::DepthScale`] for a depth scale outside `(0, MAX_DEPTH_SCALE]` (NaN and
+/// infinities included). [`Surface::new`] takes any value and sanitizes it
+/// ([`sanitized_depth_scale`]); check first to report bad input instead.
+pub fn check_depth_scale(depth_scale: f32) -> Result<(), TraceParamError> {
+    if depth_scale > 0.0 && depth_scale <= MAX_DEPTH_SCALE {
+        Ok(())
+    } else {
+        Err(TraceParamError::DepthScale(depth_scale))
+    }
 }
 
-/// The most steps of [`crate::cone::first_hit`] for a view ray at `depth_scale`: two per
-/// texel boundary crossed (a step above a footprint's top ends at the top or past a boundary;
-/// a step at or below it crosses the footprint), over the longest ray accepted.
-pub(crate) fn cone_step_bound(surface: &Surface, depth_scale: f32) -> u64 {
+/// `depth_scale` clamped to `(0, MAX_DEPTH_SCALE]`; NaN, infinite, zero and negative values give
+/// the default (infinity too: it is no depth at all, not the deepest one).
+#[must_use]
+pub fn sanitized_depth_scale(depth_scale: f32) -> f32 {
+    if depth_scale.is_finite() && depth_scale > 0.0 {
+        depth_scale.min(MAX_DEPTH_SCALE)
+    } else {
+        crate::params::DEPTH_SCALE.default.f32()
+    }
+}
+
+/// The most steps of [`crate::cone::first_hit`] for a view ray on `surface` (at its depth
+/// scale): two per texel boundary crossed (a step above a footprint's top ends at the top or
+/// past a boundary; a step at or below it crosses the footprint), over the longest ray accepted.
+pub(crate) fn cone_step_bound(surface: &Surface) -> u64 {
     let f = surface.field();
-    let travel = f64::from(sanitized_depth_scale(depth_scale)) / f64::from(MIN_COS) * (1.0 + 1e-4);
+    let travel = f64::from(surface.depth_scale()) / f64::from(MIN_COS) * (1.0 + 1e-4);
     let d = DVec3::new(travel * f64::from(f.width()), travel * f64::from(f.height()), 1.0);
     let (w, h) = (i64::from(f.width()), i64::from(f.height()));
     exact_step_bound(d, 0.0, 1.0, w, h, surface.edges())
@@ -459,8 +464,8 @@ pub(crate) fn entering(dir: Vec3) -> Option<Vec3> {
 ///
 /// Parameters are [`TraceParams::sanitized`] first, so any input gives a finite hit in a
 /// bounded time ([`Technique::fetch_bound`]); validate them with [`TraceParams::validate`] to
-/// report bad input instead. `params.depth_scale` and `params.edges` should match the
-/// surface's (`iterative`'s parallax map uses the surface's).
+/// report bad input instead. The depth scale and the edge mode are the surface's
+/// ([`Surface::new`]).
 ///
 /// Where the surface's edges wrap, the entry point is first reduced to its tile
 /// (`reduce_to_tile`): the trace runs from `uv - floor(uv)` and the hit is moved back by the
@@ -535,24 +540,24 @@ pub(crate) fn march<P: Profile>(
     profile: &P,
 ) -> Hit {
     let none = Hit { uv: uv0, depth: 0.0, fetches: 0 };
-    let s = uv_per_depth(dir, p.depth_scale) * profile.extent();
+    let s = uv_per_depth(dir, surface.depth_scale) * profile.extent();
     let at = |z: f32| uv0 + s * z;
     match technique {
         Technique::Flat | Technique::Normal => none,
         Technique::Parallax => {
             // Kaneko's offset d * ds * V.xy / V.z, limited (Welsh 2004) by dropping the division:
             // the shift never exceeds the sampled depth times the depth scale.
-            let s = uv_per_depth(dir, p.depth_scale);
+            let s = uv_per_depth(dir, surface.depth_scale);
             let d = surface.depth(uv0, p.lod);
-            let offset = Vec2::new(dir.x, dir.y) * (d * p.depth_scale);
+            let offset = Vec2::new(dir.x, dir.y) * (d * surface.depth_scale);
             hit_on_ray(uv0, s, offset, d * -dir.z, 1)
         }
         Technique::Iterative => {
             // Lengyel Listing 7.9 in pomkit's depth convention: the polygon is the top, so the
             // map holds n_z * d (no signed remap) and every step moves away from the viewer.
-            let s = uv_per_depth(dir, p.depth_scale);
+            let s = uv_per_depth(dir, surface.depth_scale);
             let k = p.iterations;
-            let step = Vec2::new(dir.x, dir.y) * (p.depth_scale / k as f32);
+            let step = Vec2::new(dir.x, dir.y) * (surface.depth_scale / k as f32);
             let mut uv = uv0;
             let mut sum = 0.0;
             for _ in 0..k {
@@ -612,7 +617,7 @@ fn pom_classic<P: Profile>(surface: &Surface, uv0: Vec2, dir: Vec3, p: &TracePar
     // vertex shader). Clamped at 0 so the vector never points back toward the viewer.
     let cos = -dir.z;
     let bias = (p.perspective_bias + (1.0 - p.perspective_bias) * (2.0 * cos - 1.0)).max(0.0);
-    let s = uv_per_depth(dir, p.depth_scale) * (bias * profile.extent());
+    let s = uv_per_depth(dir, surface.depth_scale) * (bias * profile.extent());
     let n = 8;
     // Brawley samples at 1/8 .. 8/8 of the vector; the entry (t = 0) is not fetched, and the
     // first segment reuses the first sample's depth for its start, as the article's shader does.

@@ -19,7 +19,9 @@ pub struct Surface {
 impl Surface {
     /// Prepares `field` for tracing with the given edge mode and depth scale (the parallax map
     /// depends on the depth scale through its normals: the full depth spans
-    /// `depth_scale * width` texels).
+    /// `depth_scale * width` texels). Every trace and shadow on the surface works at this depth
+    /// scale and samples with these edges. `depth_scale` is [`sanitized_depth_scale`]d, so any
+    /// value gives a usable surface; check it with [`check_depth_scale`] to report bad input.
     #[must_use]
     pub fn new(field: HeightField, edges: EdgeMode, depth_scale: f32) -> Self {
         let pyramid = MaxHeightPyramid::new(&field, edges);
@@ -112,8 +114,8 @@ impl Surface {
         self.mips.sample(uv, lod, self.edges)
     }
 
-    /// The most fetches the exact tracer makes for any one view or shadow ray at `depth_scale`
-    /// (sanitized as [`TraceParams::sanitized`] does), saturating at `u32::MAX`.
+    /// The most fetches the exact tracer makes for any one view or shadow ray at this surface's
+    /// depth scale, saturating at `u32::MAX`.
     ///
     /// A ray's UV travel per unit of depth is at most `depth_scale / MIN_COS` (the flattest ray
     /// accepted), so it crosses at most `depth_scale / MIN_COS * width + 2` texel columns and as
@@ -123,10 +125,10 @@ impl Surface {
     /// the typical cost: the pyramid skips empty stretches a tile at a time, so a typical ray
     /// makes O(log size) fetches per tile it crosses.
     #[must_use]
-    pub fn exact_fetch_bound(&self, depth_scale: f32) -> u32 {
+    pub fn exact_fetch_bound(&self) -> u32 {
         let f = self.field();
         // A relative margin covers the f32 rounding of the ray's UV step.
-        let travel = f64::from(sanitized_depth_scale(depth_scale)) / f64::from(MIN_COS) * (1.0 + 1e-4);
+        let travel = f64::from(self.depth_scale) / f64::from(MIN_COS) * (1.0 + 1e-4);
         let d = DVec3::new(travel * f64::from(f.width()), travel * f64::from(f.height()), 1.0);
         let (w, h) = (i64::from(f.width()), i64::from(f.height()));
         let steps = exact_step_bound(d, 0.0, 1.0, w, h, self.edges);
@@ -137,13 +139,14 @@ impl Surface {
 }
 
 impl Surface {
-    /// The most fetches the `cone` technique makes for one view ray at `depth_scale` with
+    /// The most fetches the `cone` technique makes for one view ray at this surface's depth
+    /// scale with
     /// `binary_steps`: at most two steps per texel boundary the ray crosses (as for `exact`,
     /// [`Surface::exact_fetch_bound`]), each one cone read and then up to three gathers, and the
     /// binary search. Saturates at `u32::MAX`.
     #[must_use]
-    pub fn cone_fetch_bound(&self, depth_scale: f32, binary_steps: u32) -> u32 {
-        let steps = cone_step_bound(self, depth_scale);
+    pub fn cone_fetch_bound(&self, binary_steps: u32) -> u32 {
+        let steps = cone_step_bound(self);
         u32::try_from(steps.saturating_mul(4).saturating_add(u64::from(binary_steps.min(64)))).unwrap_or(u32::MAX)
     }
 }

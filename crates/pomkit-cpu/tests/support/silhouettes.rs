@@ -43,13 +43,9 @@ pub fn scene(shape: Shape, technique: Technique, silhouette: bool, texels: u32) 
         height: Some(Arc::new(generate(pattern, texels, texels))),
         technique,
         base_color: Vec3::splat(0.8),
-        trace: TraceParams {
-            depth_scale,
-            edges: EdgeMode::Wrap,
-            min_samples: 16,
-            max_samples: 64,
-            ..Default::default()
-        },
+        depth_scale,
+        edges: EdgeMode::Wrap,
+        trace: TraceParams { min_samples: 16, max_samples: 64, ..Default::default() },
         silhouette,
         ..Material::default()
     };

@@ -74,9 +74,9 @@ impl GpuMaterial {
         technique: Technique,
         normal_filter: NormalFilter,
     ) -> Result<Self, GpuError> {
-        let p = material.trace.sanitized();
+        let depth_scale = pomkit_core::trace::sanitized_depth_scale(material.depth_scale);
         let height_options =
-            HeightPassOptions { edges: p.edges, depth_scale: p.depth_scale, filter: normal_filter, build_cones: false };
+            HeightPassOptions { edges: material.edges, depth_scale, filter: normal_filter, build_cones: false };
         let height = match &material.height {
             Some(field) => {
                 let maps = HeightMaps::new(ctx, field.width(), field.height(), &material.name)?;
@@ -111,7 +111,7 @@ impl GpuMaterial {
         };
         let albedo_tex =
             texture_with_mips(ctx, "pomkit albedo", wgpu::TextureFormat::Rgba16Float, &rgba_levels(&albedo));
-        let sampler = trilinear_sampler(&ctx.device, p.edges, "pomkit material");
+        let sampler = trilinear_sampler(&ctx.device, material.edges, "pomkit material");
         let field = material.height.as_deref();
         let has_normals = explicit_normals.is_some() || field.is_some_and(|f| f.width() >= 2 && f.height() >= 2);
         let params = PomkitParams::from_material(material, technique);
@@ -181,13 +181,12 @@ impl GpuMaterial {
         height: &HeightResource,
         albedo: Option<&wgpu::Texture>,
     ) -> Result<Self, GpuError> {
-        let p = material.trace.sanitized();
-        if p.edges != height.edges() {
+        if material.edges != height.edges() {
             return Err(GpuError::Unsupported(format!(
                 "material \"{}\" traces with {:?} edges but height map \"{}\" was built with {:?} edges: build \
                  them with the same edge mode",
                 material.name,
-                p.edges,
+                material.edges,
                 height.label(),
                 height.edges()
             )));
@@ -288,7 +287,7 @@ impl GpuMaterial {
     /// [`ParamError::EdgesChanged`] when the edge mode differs: the sampler's address mode
     /// is part of the bind group, so make a new material for that.
     pub fn set_params(&mut self, ctx: &GpuContext, params: &PomkitParams) -> Result<(), ParamError> {
-        if params.trace.edges != self.params.trace.edges {
+        if params.edges != self.params.edges {
             return Err(ParamError::EdgesChanged);
         }
         ctx.queue.write_buffer(&self.uniforms, 0, &params.to_bytes());
@@ -298,8 +297,7 @@ impl GpuMaterial {
             self.cones_stale.store(true, std::sync::atomic::Ordering::Relaxed);
         }
         self.technique = params.technique;
-        let depth_scale = params.trace.sanitized().depth_scale;
-        self.height_options.depth_scale = depth_scale;
+        self.height_options.depth_scale = pomkit_core::trace::sanitized_depth_scale(params.depth_scale);
         Ok(())
     }
 

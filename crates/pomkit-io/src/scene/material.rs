@@ -26,7 +26,7 @@ impl Loader<'_> {
             None => d.technique,
         };
         let edges = match m.edges.as_deref() {
-            None => td.edges,
+            None => d.edges,
             Some(e) => EdgeMode::from_name(e).ok_or_else(|| {
                 self.invalid(at, "edges", format!("edges {e:?} is unknown: expected {}", params::EDGES.kind.describe()))
             })?,
@@ -46,8 +46,8 @@ impl Loader<'_> {
             None => Channel::Luma,
         };
 
+        let depth_scale = m.depth_scale.unwrap_or(d.depth_scale);
         let trace = TraceParams {
-            depth_scale: m.depth_scale.unwrap_or(td.depth_scale),
             min_samples: m.min_samples.unwrap_or(td.min_samples),
             max_samples: m.max_samples.unwrap_or(td.max_samples),
             samples: m.samples.unwrap_or(td.samples),
@@ -55,10 +55,9 @@ impl Loader<'_> {
             binary_steps: m.binary_steps.unwrap_or(td.binary_steps),
             refine: m.refine.unwrap_or(td.refine),
             perspective_bias: m.perspective_bias.unwrap_or(td.perspective_bias),
-            edges,
             lod: td.lod,
         };
-        trace.validate().map_err(|e| {
+        pomkit_core::trace::check_depth_scale(depth_scale).and_then(|()| trace.validate()).map_err(|e| {
             let field = match e {
                 TraceParamError::DepthScale(_) => "depth_scale",
                 TraceParamError::PerspectiveBias(_) => "perspective_bias",
@@ -183,15 +182,14 @@ impl Loader<'_> {
             }
             (Some(c), Some(field)) => match self.source(at, "cone_map", c)? {
                 Source::File(path) => {
-                    let map =
-                        crate::load_cone_map(&path, field.width(), field.height(), trace.edges).map_err(|source| {
-                            SceneError::Texture {
-                                file: self.file.to_owned(),
-                                at: at.to_owned(),
-                                field: "cone_map".to_owned(),
-                                cause: Box::new(source),
-                            }
-                        })?;
+                    let map = crate::load_cone_map(&path, field.width(), field.height(), edges).map_err(|source| {
+                        SceneError::Texture {
+                            file: self.file.to_owned(),
+                            at: at.to_owned(),
+                            field: "cone_map".to_owned(),
+                            cause: Box::new(source),
+                        }
+                    })?;
                     Some(Arc::new(map))
                 }
                 Source::Builtin(..) => {
@@ -211,6 +209,8 @@ impl Loader<'_> {
             normal_map,
             height,
             technique,
+            depth_scale,
+            edges,
             trace,
             shadow,
             lod_threshold,
