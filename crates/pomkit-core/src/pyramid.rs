@@ -33,6 +33,47 @@ pub struct MaxHeightPyramid {
     levels: Vec<Level>,
 }
 
+/// A depth type the footprint minimum is computed in: `f32` for the pyramid, `f64` for the cone
+/// build's exact tops. The same expression in either, so each is what its caller always had.
+pub(crate) trait Depth: Copy + std::ops::Add<Output = Self> + std::ops::Mul<Output = Self> {
+    /// 1/2.
+    const HALF: Self;
+    /// 1/4.
+    const QUARTER: Self;
+    /// The smaller of the two.
+    fn min(self, other: Self) -> Self;
+}
+
+impl Depth for f32 {
+    const HALF: Self = 0.5;
+    const QUARTER: Self = 0.25;
+    fn min(self, other: Self) -> Self {
+        f32::min(self, other)
+    }
+}
+
+impl Depth for f64 {
+    const HALF: Self = 0.5;
+    const QUARTER: Self = 0.25;
+    fn min(self, other: Self) -> Self {
+        f64::min(self, other)
+    }
+}
+
+/// The least depth of the bilinear surface over one texel's footprint: the least of the nine
+/// corners of its four quarters (its centre, edge midpoints and corners; the module docs say
+/// why that is exact). `d(dx, dy)` is the depth of the texel at offset `(dx, dy)`, each in
+/// `-1..=1`. The pyramid's level 0 and the cone build's exact tops both use it.
+pub(crate) fn footprint_min<T: Depth>(d: impl Fn(i64, i64) -> T) -> T {
+    let c = d(0, 0);
+    let (l, r, u, b) = (d(-1, 0), d(1, 0), d(0, -1), d(0, 1));
+    let (ul, ur, bl, br) = (d(-1, -1), d(1, -1), d(-1, 1), d(1, 1));
+    let mids = [(c + l) * T::HALF, (c + r) * T::HALF, (c + u) * T::HALF, (c + b) * T::HALF];
+    let q = T::QUARTER;
+    let corners = [(c + l + u + ul) * q, (c + r + u + ur) * q, (c + l + b + bl) * q, (c + r + b + br) * q];
+    mids.into_iter().chain(corners).fold(c, T::min)
+}
+
 impl MaxHeightPyramid {
     /// Builds the pyramid of `field` for the given edge mode (which decides the neighbours of
     /// border texels, exactly as bilinear sampling with that mode does).
@@ -42,20 +83,7 @@ impl MaxHeightPyramid {
         let mut base = Vec::with_capacity(w as usize * h as usize);
         for y in 0..i64::from(h) {
             for x in 0..i64::from(w) {
-                let d = |dx: i64, dy: i64| field.depth_at(x + dx, y + dy, edges);
-                let c = d(0, 0);
-                let (l, r, u, b) = (d(-1, 0), d(1, 0), d(0, -1), d(0, 1));
-                let (ul, ur, bl, br) = (d(-1, -1), d(1, -1), d(-1, 1), d(1, 1));
-                // Edge midpoints and footprint corners of the bilinear surface.
-                let mids = [(c + l) * 0.5, (c + r) * 0.5, (c + u) * 0.5, (c + b) * 0.5];
-                let corners = [
-                    (c + l + u + ul) * 0.25,
-                    (c + r + u + ur) * 0.25,
-                    (c + l + b + bl) * 0.25,
-                    (c + r + b + br) * 0.25,
-                ];
-                let m = mids.into_iter().chain(corners).fold(c, f32::min);
-                base.push(m);
+                base.push(footprint_min(|dx, dy| field.depth_at(x + dx, y + dy, edges)));
             }
         }
         let mut levels = vec![Level { width: w, height: h, min_depth: base }];

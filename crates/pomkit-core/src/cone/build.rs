@@ -63,14 +63,7 @@ impl<'a> Search<'a> {
     /// The least depth of the bilinear surface over footprint `(i, j)`, in `f64`: the least of
     /// its texel centre, edge midpoints and corners ([`crate::pyramid`]).
     pub(super) fn exact_top(&self, i: i64, j: i64) -> f64 {
-        let d = |dx: i64, dy: i64| self.texel(i + dx, j + dy);
-        let c = d(0, 0);
-        let (l, r, u, b) = (d(-1, 0), d(1, 0), d(0, -1), d(0, 1));
-        let (ul, ur, bl, br) = (d(-1, -1), d(1, -1), d(-1, 1), d(1, 1));
-        let mids = [(c + l) * 0.5, (c + r) * 0.5, (c + u) * 0.5, (c + b) * 0.5];
-        let corners =
-            [(c + l + u + ul) * 0.25, (c + r + u + ur) * 0.25, (c + l + b + bl) * 0.25, (c + r + b + br) * 0.25];
-        mids.into_iter().chain(corners).fold(c, f64::min)
+        crate::pyramid::footprint_min(|dx, dy| self.texel(i + dx, j + dy))
     }
 
     /// The depth of texel `(x, y)` (any integers: wrapped or clamped).
