@@ -51,9 +51,10 @@ covered pixel (view trace plus shadow trace; covered = a pixel whose uv AOV is n
 each renderer's own warm-up frame.
 
 With --displaced, the ground truth is added on the CPU: the height-mapped meshes tessellated to \
-one triangle edge per texel and displaced for real, shaded with normal mapping and the materials' \
-shadows. It is timed once, with no warm-up (it takes minutes at 1280x720): the whole render call, \
-tessellation included, with the AOVs on (its fetches are the shadow trace's only). Standard error \
+one triangle edge per texel (coarsened where the screen cannot tell, by at most a quarter of a \
+pixel) and displaced for real, streamed a block of triangles at a time, shaded with normal \
+mapping and the materials' shadows. It is timed as the techniques are, a warm-up and then \
+--cpu-runs frames, tessellation included (its fetches are the shadow trace's only). Standard error \
 also shows, per CPU frame, the time until the first tile was shaded (setup: materials, \
 tessellation, vertex stage, triangle setup), and every GPU frame's pass times.
 
@@ -89,8 +90,7 @@ pub struct BenchArgs {
     /// material's own technique.
     #[arg(long, default_value = "all,material", value_name = "T,..")]
     techniques: String,
-    /// Also time the `displaced` ground truth on the CPU renderer, once (slow: minutes at
-    /// 1280x720).
+    /// Also time the `displaced` ground truth on the CPU renderer (a few times a POM frame).
     #[arg(long)]
     displaced: bool,
     /// Output format.
@@ -228,9 +228,8 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         rows.push(Row { name: name.clone(), cpu: cpu_stats, gpu: gpu_stats });
     }
     if a.displaced {
-        let opts = RenderOptions { mode: Mode::Displaced, aovs: true, ..base };
-        let f = frame(&scene, &opts, "displaced: one CPU run (tessellation included, no warm-up)")?;
-        let cpu = cpu_stats(1, f.time, w, h, fetches_per_covered_pixel(&f.out));
+        let opts = RenderOptions { mode: Mode::Displaced, ..base };
+        let cpu = cpu_frames(&scene, &opts, "displaced", cpu_runs)?;
         rows.push(Row { name: "displaced".into(), cpu: Some(cpu), gpu: None });
     }
     let caption = caption(a, w, h, gpu.as_deref(), gpu_runs, cpu_runs, skipped.as_deref(), &rows);
@@ -271,7 +270,7 @@ fn caption(
             "CPU: pomkit-cpu on {} thread(s); median of {cpu_runs} frame(s) per technique after one warm-up, \
              whole render call{}.",
             rayon::current_num_threads(),
-            if a.displaced { "; displaced: one frame, no warm-up, tessellation included" } else { "" }
+            if a.displaced { ", tessellation included for displaced" } else { "" }
         ));
     }
     if gpu.is_some() && cpu_runs > 0 {

@@ -27,13 +27,15 @@ pub struct RenderArgs {
     output: PathBuf,
     /// Use this technique on every material (flat, normal, parallax, iterative, steep,
     /// pom-classic, pom, relief, exact, cone) or `displaced` for the ground truth: the meshes
-    /// tessellated to the height map's resolution and displaced for real.
+    /// tessellated to the height map's resolution and displaced for real (on the CPU renderer
+    /// unless --backend gpu: streamed, and coarsened where the screen cannot tell, by at most an
+    /// eighth of a pixel).
     #[arg(long)]
     technique: Option<String>,
     /// Renderer: cpu (pomkit-cpu, on all cores), gpu (pomkit-gpu on wgpu: Vulkan, Metal or
     /// DX12; fails when there is no adapter), or auto: the GPU when an adapter exists, else the
-    /// CPU, and also the CPU when the GPU cannot draw the scene (e.g. more than 4 lights). The
-    /// choice is reported on standard error. Both give the same picture within a small tolerance.
+    /// CPU, and also the CPU when the GPU cannot draw the scene (e.g. more than 4 lights) and
+    /// for the `displaced` reference. The choice is reported on standard error. Both give the same picture within a small tolerance.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
     /// Image size.
@@ -55,6 +57,11 @@ pub struct RenderArgs {
     /// normal mapping does (beyond each material's lod_threshold), blended across the fade.
     #[arg(long)]
     lod_tint: bool,
+    /// `displaced` on the CPU renderer: how far, in pixels, its coarsened surface may lie on
+    /// screen from the full subdivision's (0: the full subdivision, one triangle edge per
+    /// texel everywhere; several times slower).
+    #[arg(long, default_value_t = pomkit_core::render::DISPLACED_TOLERANCE, value_name = "PX")]
+    displaced_tolerance: f32,
 }
 
 /// A technique name or `displaced`, given to `flag` (`--technique` or `--compare`), which an
@@ -78,6 +85,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     if !(1..=8).contains(&a.supersample) {
         bail!("--supersample {}: must be 1 to 8", a.supersample);
+    }
+    if !(0.0..=64.0).contains(&a.displaced_tolerance) {
+        bail!("--displaced-tolerance {}: must be 0 to 64 pixels", a.displaced_tolerance);
     }
     let mode = match &a.technique {
         Some(t) => parse_mode(t, "--technique")?,
@@ -118,6 +128,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         mode,
         aovs: !a.aov.is_empty(),
         lod_tint: a.lod_tint,
+        // In samples: the same distance on screen whatever the supersampling.
+        displaced_tolerance: a.displaced_tolerance * a.supersample as f32,
         ..Default::default()
     };
     if modes.is_empty() {
@@ -212,7 +224,15 @@ impl Renderer {
     fn render(&mut self, scene: &Scene, opts: &RenderOptions, what: &str) -> Result<RenderOutput> {
         let ss = opts.supersample.max(1);
         let samples = u64::from(opts.width * ss) * u64::from(opts.height * ss);
-        let out = match self.gpu.as_mut() {
+        // `--backend auto` draws the displaced reference on the CPU renderer, which streams it
+        // and coarsens it for the view (docs/BENCHMARKS.md); the GPU renderer holds the whole
+        // subdivided mesh, tens of millions of triangles for the demo.
+        let on_cpu = self.fallback && opts.mode == Mode::Displaced && self.gpu.is_some();
+        if on_cpu {
+            eprintln!("backend: cpu (for the displaced reference, which the CPU renderer streams)");
+        }
+        let gpu = self.gpu.as_mut().filter(|_| !on_cpu);
+        let out = match gpu {
             Some(gpu) => {
                 let result = progress::spinner_when(samples >= GPU_SPINNER_SAMPLES, &format!("{what} (GPU)"), || {
                     gpu.render(scene, opts)

@@ -48,11 +48,29 @@ impl EdgeMode {
     #[must_use]
     pub fn resolve(self, i: i64, size: u32) -> u32 {
         debug_assert!(size > 0);
+        // Most coordinates are inside already: no division for them.
+        if (0..i64::from(size)).contains(&i) {
+            return i as u32;
+        }
         match self {
             // `rem_euclid` handles any size, unlike Lengyel's power-of-two mask.
             EdgeMode::Wrap => i.rem_euclid(i64::from(size)) as u32,
             EdgeMode::Clamp => i.clamp(0, i64::from(size) - 1) as u32,
         }
+    }
+}
+
+/// `x.floor()` without a call into libm on targets without SSE4.1 (the baseline x86-64 this
+/// crate builds for), exact for every finite `x`.
+#[inline]
+#[must_use]
+pub fn floor(x: f32) -> f32 {
+    // Beyond 2^23 every f32 is a whole number already.
+    if x.abs() < 8_388_608.0 {
+        let i = x as i32 as f32;
+        if i > x { i - 1.0 } else { i }
+    } else {
+        x
     }
 }
 
@@ -215,12 +233,22 @@ impl HeightField {
     pub fn sample_bilinear(&self, uv: Vec2, edges: EdgeMode) -> f32 {
         let t = uv * self.size_f32() - 0.5;
         let t = if t.is_finite() { t } else { Vec2::ZERO };
-        let f = t.floor();
+        let f = Vec2::new(floor(t.x), floor(t.y));
         let (fx, fy) = (t.x - f.x, t.y - f.y);
         // `as` saturates far outside the i64 range (|uv| * size beyond 9.2e18); the neighbour then
         // saturates too rather than overflow (such coordinates carry no sub-texel position in f32
         // anyway).
         let (x0, y0) = (f.x as i64, f.y as i64);
+        let (w, h) = (i64::from(self.width), i64::from(self.height));
+        if x0 >= 0 && y0 >= 0 && x0 + 1 < w && y0 + 1 < h {
+            // Inside: the four texels without edge handling.
+            let at = y0 as usize * self.width as usize + x0 as usize;
+            let (d00, d10) = (self.depth[at], self.depth[at + 1]);
+            let (d01, d11) = (self.depth[at + self.width as usize], self.depth[at + self.width as usize + 1]);
+            let top = d00 + (d10 - d00) * fx;
+            let bottom = d01 + (d11 - d01) * fx;
+            return top + (bottom - top) * fy;
+        }
         let (x1, y1) = (x0.saturating_add(1), y0.saturating_add(1));
         let d00 = self.depth_at(x0, y0, edges);
         let d10 = self.depth_at(x1, y0, edges);

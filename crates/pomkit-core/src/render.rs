@@ -20,6 +20,9 @@ pub enum Mode {
     Displaced,
 }
 
+/// The default [`RenderOptions::displaced_tolerance`]: an eighth of a sample.
+pub const DISPLACED_TOLERANCE: f32 = 0.125;
+
 /// Render settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
@@ -36,6 +39,10 @@ pub struct RenderOptions {
     /// `displaced` mode: largest triangle edge in texels of the height map (1 = the height
     /// map's resolution, the ground truth of docs/ACCURACY.md).
     pub displaced_edge_texels: f32,
+    /// `displaced` mode on the CPU renderer: how far (in samples) the surface may lie on screen
+    /// from that of the full subdivision where the renderer coarsens it
+    /// ([`DisplacementView`](crate::mesh::DisplacementView)); 0 keeps the full subdivision.
+    pub displaced_tolerance: f32,
     /// Debug view of the LOD system (Tatarchuk 2006 figure 12): tint pixels green where the
     /// full technique runs, red where only normal mapping does, blended across the fade.
     pub lod_tint: bool,
@@ -50,6 +57,7 @@ impl Default for RenderOptions {
             mode: Mode::Material,
             aovs: false,
             displaced_edge_texels: 1.0,
+            displaced_tolerance: DISPLACED_TOLERANCE,
             lod_tint: false,
         }
     }

@@ -9,7 +9,11 @@
 //!
 //! It is also the reference the GPU renderer is tested against, and it renders the ground truth:
 //! [`Mode::Displaced`] tessellates every height-mapped mesh to the height map's resolution and
-//! moves its vertices for real.
+//! moves its vertices for real. That geometry is streamed ([`pomkit_core::mesh::DisplacedBlocks`]):
+//! made a block of at most 128 triangles at a time in each tile that needs it and dropped, never
+//! held whole, and coarsened for the view where the surface would move by less than
+//! [`RenderOptions::displaced_tolerance`] samples on screen (docs/BENCHMARKS.md measures it
+//! against the whole mesh).
 //!
 //! ```
 //! use pomkit_cpu::{CpuRenderer, RenderOptions};
@@ -27,9 +31,9 @@ pub mod raster;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use glam::{Vec2, Vec3, Vec4};
+use glam::{Mat4, Vec2, Vec3, Vec4};
 use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals};
-use pomkit_core::mesh::{Mesh, tangent_ray};
+use pomkit_core::mesh::{DisplacedBlock, DisplacedBlocks, DisplacementView, Mesh, tangent_ray};
 use pomkit_core::scene::{Light, Material, NormalMap, Scene, Texture};
 use pomkit_core::shadow::{ShadowMode, lod_weight, shadow};
 use pomkit_core::silhouette::{trace_curved, vertex_curvature, view_curvature};
@@ -42,7 +46,7 @@ pub use pomkit_core::render::{
     Aovs, Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve, resolve_rows, validate,
 };
 
-use raster::{ClipVertex, Fragment, ScreenTriangle, Varyings, clip_near, setup};
+use raster::{ClipVertex, Fragment, ScreenTriangle, Varyings, clip_near, needs_clipping, setup};
 
 /// A material prepared for shading: surfaces, mip chains, normal maps.
 struct Prepared {
@@ -111,11 +115,38 @@ impl CpuRenderer {
         estimate(scene, opts).check(|| describe_job(opts), &advice(scene, opts))?;
         let prepared = prepare(scene, opts);
         let triangles = self.triangles(scene, &prepared, opts, sw, sh)?;
+        // The displaced reference's height-mapped objects are streamed: their subdivided
+        // triangles are made a block at a time, in the tiles that need them, and dropped.
+        let worlds: Vec<(u32, Mesh)> = scene
+            .objects
+            .iter()
+            .enumerate()
+            .filter(|(_, obj)| streamed(&prepared[obj.material], opts))
+            .map(|(oi, obj)| (oi as u32, obj.mesh.transformed(obj.transform)))
+            .collect();
+        let aspect = sw as f32 / sh as f32;
+        let vp = scene.camera.projection(aspect) * scene.camera.view();
+        let view = DisplacementView {
+            view_proj: vp,
+            size: Vec2::new(sw as f32, sh as f32),
+            tolerance: opts.displaced_tolerance,
+        };
+        let streams: Vec<Stream<'_>> = worlds
+            .iter()
+            .filter_map(|(oi, world)| {
+                let prep = &prepared[scene.objects[*oi as usize].material];
+                let field = prep.material.height.as_deref()?;
+                let blocks =
+                    world.displaced_blocks(field, prep.edges, prep.depth_scale, opts.displaced_edge_texels, Some(view));
+                Some(Stream { object: *oi, blocks })
+            })
+            .collect();
         let (mut color, mut aovs) = pomkit_core::render::output_buffers(w, h, opts.aovs)?;
         let covered = shade_bands(
             scene,
             &prepared,
             &triangles,
+            &Streamed { streams: &streams, vp },
             (w, h, ss),
             &mut color,
             opts.aovs.then_some(&mut aovs),
@@ -136,7 +167,7 @@ impl CpuRenderer {
     ) -> Result<Vec<ScreenTriangle>, MemoryError> {
         let aspect = sw as f32 / sh as f32;
         let vp = scene.camera.projection(aspect) * scene.camera.view();
-        let (tris, _) = geometry_counts(scene, opts);
+        let tris = geometry_counts(scene, opts).triangles;
         let mut out = Vec::new();
         out.try_reserve_exact(usize::try_from(tris).unwrap_or(usize::MAX)).map_err(|e| MemoryError::Allocation {
             what: format!("the triangle list ({tris} triangles)"),
@@ -146,40 +177,25 @@ impl CpuRenderer {
         })?;
         for (oi, obj) in scene.objects.iter().enumerate() {
             let prep = &prepared[obj.material];
-            let mesh: Arc<Mesh> = match (opts.mode, &prep.material.height) {
-                (Mode::Displaced, Some(field)) => Arc::new(obj.mesh.try_displaced_for_shading(
-                    field,
-                    prep.edges,
-                    prep.depth_scale,
-                    opts.displaced_edge_texels,
-                )?),
-                _ => obj.mesh.clone(),
-            };
-            let world = mesh.transformed(obj.transform);
-            let displaced = opts.mode == Mode::Displaced && prep.material.height.is_some();
+            if streamed(prep, opts) {
+                continue;
+            }
+            let world = obj.mesh.transformed(obj.transform);
             // Silhouettes need the surface's curvature, estimated on the world mesh (a
             // non-uniform scale changes it); without them nothing is computed.
             let curvature = if silhouettes(prep) { vertex_curvature(&world) } else { Vec::new() };
             let verts: Vec<ClipVertex> = (0..world.positions.len())
                 .map(|i| {
                     let p = world.positions[i];
-                    let uv = world.uvs[i];
-                    let depth = match (&prep.surface, displaced) {
-                        (Some(s), true) => s.field().sample_bilinear(uv, prep.edges),
-                        _ => 0.0,
-                    };
                     ClipVertex {
                         clip: vp * p.extend(1.0),
                         v: Varyings {
                             world: p,
-                            // For displaced geometry these are the undisplaced surface's
-                            // normals (`Mesh::displaced_for_shading`): the normal map adds the
-                            // bumps, as for every parallax technique.
                             normal: world.normals[i],
                             tangent: world.tangents[i],
-                            uv,
+                            uv: world.uvs[i],
                             uv_scale: world.uv_scale[i],
-                            depth,
+                            depth: 0.0,
                             curvature: curvature.get(i).copied().unwrap_or(Vec3::ZERO),
                         },
                     }
@@ -198,28 +214,168 @@ impl CpuRenderer {
     }
 }
 
+/// Whether an object of this material is drawn as a [`Stream`]: the displaced reference of a
+/// height-mapped material.
+fn streamed(prep: &Prepared, opts: &RenderOptions) -> bool {
+    opts.mode == Mode::Displaced && prep.material.height.is_some()
+}
+
+/// A height-mapped object of the displaced reference: its subdivided, displaced triangles in
+/// blocks made on demand ([`DisplacedBlocks`]), in world space.
+struct Stream<'a> {
+    object: u32,
+    blocks: DisplacedBlocks<'a>,
+}
+
+/// Every [`Stream`] of a frame, and the view-projection that takes their blocks to clip space.
+struct Streamed<'a> {
+    streams: &'a [Stream<'a>],
+    vp: Mat4,
+}
+
+/// A block's vertices after the vertex stage, reused from block to block.
+#[derive(Default)]
+struct BlockVertices {
+    block: DisplacedBlock,
+    clip: Vec<ClipVertex>,
+    /// Screen positions (samples) of the vertices in front of the near plane.
+    screen: Vec<Vec2>,
+}
+
+impl Streamed<'_> {
+    /// Makes block `b` of stream `s` and runs the vertex stage on it. For displaced geometry
+    /// the normals are the undisplaced surface's (`Mesh::displaced_for_shading`): the normal
+    /// map adds the bumps, as for every parallax technique.
+    fn vertices(&self, s: usize, b: usize, (sw, sh): (u32, u32), out: &mut BlockVertices) {
+        self.streams[s].blocks.block(b, &mut out.block);
+        let blk = &out.block;
+        out.clip.clear();
+        out.screen.clear();
+        for i in 0..blk.positions.len() {
+            let p = blk.positions[i];
+            let clip = self.vp * p.extend(1.0);
+            out.clip.push(ClipVertex {
+                clip,
+                v: Varyings {
+                    world: p,
+                    normal: blk.normals[i],
+                    tangent: blk.tangents[i],
+                    uv: blk.uvs[i],
+                    uv_scale: blk.uv_scale[i],
+                    depth: blk.depths[i],
+                    curvature: Vec3::ZERO,
+                },
+            });
+            let ndc = clip.truncate().truncate() / clip.w;
+            out.screen.push(Vec2::new((ndc.x * 0.5 + 0.5) * sw as f32, (0.5 - ndc.y * 0.5) * sh as f32));
+        }
+    }
+
+    /// The samples block `b` of stream `s` may cover, `(x0, y0, x1, y1)` (end exclusive), and
+    /// its least depth; `None` when it covers none (off screen, behind the camera, or facing
+    /// away).
+    fn bounds(&self, s: usize, b: usize, (sw, sh): (u32, u32), v: &mut BlockVertices) -> Option<([u32; 4], f32)> {
+        let (lo, hi, min_z) = match self.streams[s].blocks.screen_bounds(b) {
+            Some(known) => (known.min, known.max, known.min_z),
+            None => self.made_bounds(s, b, (sw, sh), v)?,
+        };
+        if !(lo.is_finite() && hi.is_finite()) {
+            return None;
+        }
+        // One sample of margin: pixel centres, the snap to 1/256 and the quads' even corners.
+        let x0 = (lo.x - 1.0).floor().clamp(0.0, sw as f32) as u32;
+        let y0 = (lo.y - 1.0).floor().clamp(0.0, sh as f32) as u32;
+        let x1 = (hi.x + 2.0).ceil().clamp(0.0, sw as f32) as u32;
+        let y1 = (hi.y + 2.0).ceil().clamp(0.0, sh as f32) as u32;
+        (x0 < x1 && y0 < y1).then_some(([x0, y0, x1, y1], min_z))
+    }
+
+    /// [`Streamed::bounds`] by making the block: the box of its front-facing triangles.
+    fn made_bounds(
+        &self,
+        s: usize,
+        b: usize,
+        (sw, sh): (u32, u32),
+        v: &mut BlockVertices,
+    ) -> Option<(Vec2, Vec2, f32)> {
+        self.vertices(s, b, (sw, sh), v);
+        let mut lo = Vec2::splat(f32::INFINITY);
+        let mut hi = Vec2::splat(f32::NEG_INFINITY);
+        let mut min_z = f32::INFINITY;
+        let mut any = false;
+        for tri in &v.block.triangles {
+            let t = tri.map(|k| v.clip[k as usize]);
+            if needs_clipping(&t) {
+                // Rare (blocks at the near plane or beyond the guard band): clip and set up.
+                for c in clip_near(t) {
+                    if let Some(st) = setup(&c, sw, sh, 0, true)
+                        && let Some((x0, y0, x1, y1)) = st.quad_bounds(0, 0, sw, sh)
+                    {
+                        lo = lo.min(Vec2::new(x0 as f32, y0 as f32));
+                        hi = hi.max(Vec2::new(x1 as f32, y1 as f32));
+                        min_z = min_z.min(st.min_z);
+                        any = true;
+                    }
+                }
+                continue;
+            }
+            let [a, b, c] = tri.map(|k| v.screen[k as usize]);
+            // Front faces have negative area on the y-down screen (`setup`); keep the nearly
+            // flat ones too, whose sign the fixed-point snap decides.
+            if (b - a).perp_dot(c - a) > 0.01 {
+                continue;
+            }
+            lo = lo.min(a.min(b).min(c));
+            hi = hi.max(a.max(b).max(c));
+            min_z = min_z.min(t.iter().map(|c| c.clip.z / c.clip.w).fold(f32::INFINITY, f32::min));
+            any = true;
+        }
+        any.then_some((lo, hi, min_z))
+    }
+}
+
 /// Whether the material traces with silhouettes: asked for, and a displacing technique on a
 /// height map (so never in the `displaced` reference, which has true outlines).
 fn silhouettes(prep: &Prepared) -> bool {
     prep.material.silhouette && prep.surface.is_some() && prep.technique.displaces()
 }
 
-/// Upper bounds on the triangles the vertex stage makes of `scene` (displaced meshes
-/// subdivided, see [`Mesh::displaced_bounds`]) and on the vertices of its largest object.
-fn geometry_counts(scene: &Scene, opts: &RenderOptions) -> (u64, u64) {
-    let mut tris = 0u64;
-    let mut largest = 0u64;
+/// Upper bounds on what the vertex stage makes of `scene`: the triangles of its drawn meshes,
+/// the vertices of its largest object, and the blocks of its streamed (displaced) objects.
+fn geometry_counts(scene: &Scene, opts: &RenderOptions) -> Geometry {
+    let mut g = Geometry::default();
     for obj in &scene.objects {
         let field = scene.materials.get(obj.material).and_then(|m| m.height.as_ref());
-        let (t, v) = match (opts.mode, field) {
-            (Mode::Displaced, Some(f)) => obj.mesh.displaced_bounds(f.width(), f.height(), opts.displaced_edge_texels),
-            _ => (obj.mesh.triangle_count() as u64, obj.mesh.positions.len() as u64),
-        };
-        tris = tris.saturating_add(t);
-        largest = largest.max(v);
+        let (tris, verts) = (obj.mesh.triangle_count() as u64, obj.mesh.positions.len() as u64);
+        g.largest = g.largest.max(verts);
+        match (opts.mode, field) {
+            (Mode::Displaced, Some(f)) => {
+                // A triangle split into n parts makes at most (n / K + 1)^2 <= 2 n^2 / K^2 + 2
+                // blocks of K x K cells (n^2 triangles).
+                let (sub, _) = obj.mesh.displaced_bounds(f.width(), f.height(), opts.displaced_edge_texels);
+                let cells = u64::from(pomkit_core::mesh::BLOCK_CELLS).pow(2);
+                g.blocks = g.blocks.saturating_add((2 * sub).div_ceil(cells).saturating_add(2 * tris));
+            }
+            _ => g.triangles = g.triangles.saturating_add(tris),
+        }
     }
-    (tris, largest)
+    g
 }
+
+/// What [`geometry_counts`] bounds.
+#[derive(Clone, Copy, Debug, Default)]
+struct Geometry {
+    /// Triangles of the meshes drawn as they are (set up all at once).
+    triangles: u64,
+    /// Vertices of the largest object (before any subdivision).
+    largest: u64,
+    /// Blocks of the streamed objects ([`DisplacedBlocks`]).
+    blocks: u64,
+}
+
+/// Bytes a streamed block holds for a frame: its place in the list, its plan for the view,
+/// its bounds and its entries in the tile bins (about two).
+const BLOCK_BYTES: u64 = 12 + 48 + 24 + 2 * 16;
 
 /// What a render is, for messages: "render of 16384x16384 with AOVs".
 fn describe_job(opts: &RenderOptions) -> String {
@@ -266,8 +422,9 @@ const ALBEDO_BYTES_PER_TEXEL: u64 = 16;
 /// An upper bound on the memory [`CpuRenderer::render`] allocates for `scene` with `opts`
 /// (beyond the scene itself), by part: the output frame (colour, AOVs, and an 8-bit copy for
 /// the PNG), the sample bands in flight, the triangle list and its tile bins, the largest
-/// object's vertex stage (its displaced mesh, its world-space copy and clip-space vertices),
-/// and the prepared materials (surfaces, normal maps, albedo mips).
+/// object's vertex stage (its world-space copy and clip-space vertices), the displaced
+/// reference's blocks (streamed: the subdivided triangles themselves are never held), and the
+/// prepared materials (surfaces, normal maps, albedo mips).
 #[must_use]
 pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
     use pomkit_core::memory::bytes_of;
@@ -283,15 +440,15 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
         "sample bands",
         threads.saturating_mul(2).saturating_mul(band).min(2 * bytes_of::<Option<Sample>>(w * h * ss * ss)),
     );
-    let (tris, largest) = geometry_counts(scene, opts);
+    let g = geometry_counts(scene, opts);
     let tiles = (w * ss).div_ceil(u64::from(TILE)) * (h * ss).div_ceil(u64::from(TILE));
-    e.add("triangles", bytes_of::<ScreenTriangle>(tris));
-    e.add("triangles: tile bins", tris.saturating_mul(8).saturating_add(tiles * 32));
-    let displaced = opts.mode == Mode::Displaced;
-    // The largest object's meshes and clip-space vertices (its triangles are counted above).
-    let per_vertex = Mesh::bytes_for(1, 0) * if displaced { 3 } else { 1 } + bytes_of::<ClipVertex>(1);
-    let per_triangle = if displaced { 12 * 2 } else { 12 };
-    e.add("vertex stage", largest.saturating_mul(per_vertex).saturating_add(largest.saturating_mul(2 * per_triangle)));
+    e.add("triangles", bytes_of::<ScreenTriangle>(g.triangles));
+    e.add("triangles: tile bins", g.triangles.saturating_mul(16).saturating_add(tiles * 32));
+    // The largest object's world-space mesh and clip-space vertices (its triangles are
+    // counted above).
+    let per_vertex = Mesh::bytes_for(1, 0) + bytes_of::<ClipVertex>(1);
+    e.add("vertex stage", g.largest.saturating_mul(per_vertex).saturating_add(g.largest.saturating_mul(2 * 12)));
+    e.add("displaced blocks", g.blocks.saturating_mul(BLOCK_BYTES));
     let mut materials = 0u64;
     for m in &scene.materials {
         if let Some(f) = &m.height {
@@ -364,6 +521,7 @@ fn shade_bands(
     scene: &Scene,
     prepared: &[Prepared],
     tris: &[ScreenTriangle],
+    streamed: &Streamed<'_>,
     (w, h, ss): (u32, u32, u32),
     color: &mut [Vec3],
     aovs: Option<&mut Aovs>,
@@ -372,23 +530,40 @@ fn shade_bands(
 ) -> Result<usize, MemoryError> {
     let (sw, sh) = (w * ss, h * ss);
     let (tx, ty) = (sw.div_ceil(TILE), sh.div_ceil(TILE));
-    let mut bins: Vec<Vec<u32>> =
+    let mut bins: Vec<Vec<(f32, Item)>> =
         pomkit_core::memory::try_vec(Vec::new(), (tx * ty) as usize).map_err(|e| MemoryError::Allocation {
             what: format!("the tile bins of a {sw}x{sh}-sample frame"),
             bytes: u64::from(tx * ty) * 24,
             reason: e.to_string(),
             advice: "use a smaller --size or a lower --supersample".into(),
         })?;
-    for (i, t) in tris.iter().enumerate() {
-        let Some((x0, y0, x1, y1)) = t.quad_bounds(0, 0, sw, sh) else { continue };
+    let mut bin = |(x0, y0, x1, y1): (u32, u32, u32, u32), z: f32, item: Item| {
         for by in y0 / TILE..=(y1 - 1) / TILE {
             for bx in x0 / TILE..=(x1 - 1) / TILE {
-                bins[(by * tx + bx) as usize].push(i as u32);
+                bins[(by * tx + bx) as usize].push((z, item));
+            }
+        }
+    };
+    for (i, t) in tris.iter().enumerate() {
+        if let Some(b) = t.quad_bounds(0, 0, sw, sh) {
+            bin(b, t.min_z, Item::Triangle(i as u32));
+        }
+    }
+    // Each block of the streamed objects is made once here for its bounds, and again in each
+    // tile it touches.
+    for (si, stream) in streamed.streams.iter().enumerate() {
+        let bounds: Vec<Option<([u32; 4], f32)>> = (0..stream.blocks.len())
+            .into_par_iter()
+            .map_init(BlockVertices::default, |v, b| streamed.bounds(si, b, (sw, sh), v))
+            .collect();
+        for (b, found) in bounds.into_iter().enumerate() {
+            if let Some(([x0, y0, x1, y1], z)) = found {
+                bin((x0, y0, x1, y1), z, Item::Block(si as u32, b as u32));
             }
         }
     }
     // Front to back, so the early depth test rejects hidden fragments before they are traced.
-    bins.par_iter_mut().for_each(|b| b.sort_by(|&a, &c| tris[a as usize].min_z.total_cmp(&tris[c as usize].min_z)));
+    bins.par_iter_mut().for_each(|b| b.sort_by(|a, c| a.0.total_cmp(&c.0)));
     let done = AtomicUsize::new(0);
     let total = bins.len();
     // The frame's rows, cut into bands of BAND rows (AOV rows too, when asked for).
@@ -433,8 +608,15 @@ fn shade_bands(
                 .collect::<Vec<_>>()
                 .into_par_iter()
                 .map(|(bx, by)| {
-                    let buf =
-                        shade_tile(scene, prepared, tris, &bins[(by * tx + bx) as usize], (bx, by), (sw, sh), lod_tint);
+                    let buf = shade_tile(
+                        scene,
+                        prepared,
+                        (tris, streamed),
+                        &bins[(by * tx + bx) as usize],
+                        (bx, by),
+                        (sw, sh),
+                        lod_tint,
+                    );
                     let n = done.fetch_add(1, Ordering::Relaxed) + 1;
                     progress(n, total);
                     (bx * TILE, by * TILE, buf)
@@ -454,12 +636,19 @@ fn shade_bands(
     covered
 }
 
+/// What a tile bin lists: a triangle of the frame's list, or block `.1` of stream `.0`.
+#[derive(Clone, Copy, Debug)]
+enum Item {
+    Triangle(u32),
+    Block(u32, u32),
+}
+
 /// Shades tile `(bx, by)` of a `sw x sh`-sample frame: its samples, row-major.
 fn shade_tile(
     scene: &Scene,
     prepared: &[Prepared],
-    tris: &[ScreenTriangle],
-    bin: &[u32],
+    (tris, streamed): (&[ScreenTriangle], &Streamed<'_>),
+    bin: &[(f32, Item)],
     (bx, by): (u32, u32),
     (sw, sh): (u32, u32),
     lod_tint: bool,
@@ -468,10 +657,54 @@ fn shade_tile(
     let (x1, y1) = ((x0 + TILE).min(sw), (y0 + TILE).min(sh));
     let tw = x1 - x0;
     let mut buf: Vec<Option<Sample>> = vec![None; (tw * (y1 - y0)) as usize];
-    for &ti in bin {
-        let tri = &tris[ti as usize];
-        let obj = &scene.objects[tri.object as usize];
-        let prep = &prepared[obj.material];
+    let mut block = BlockVertices::default();
+    for &(_, item) in bin {
+        match item {
+            Item::Triangle(ti) => draw(scene, prepared, &tris[ti as usize], (x0, y0, x1, y1), lod_tint, &mut buf),
+            Item::Block(si, b) => {
+                streamed.vertices(si as usize, b as usize, (sw, sh), &mut block);
+                let object = streamed.streams[si as usize].object;
+                // Pixel centres a triangle can cover lie within its vertices' extent.
+                let (fx0, fy0, fx1, fy1) = (x0 as f32 - 1.0, y0 as f32 - 1.0, x1 as f32 + 1.0, y1 as f32 + 1.0);
+                for tri in &block.block.triangles {
+                    let t = tri.map(|k| block.clip[k as usize]);
+                    if needs_clipping(&t) {
+                        for c in clip_near(t) {
+                            if let Some(st) = setup(&c, sw, sh, object, true) {
+                                draw(scene, prepared, &st, (x0, y0, x1, y1), lod_tint, &mut buf);
+                            }
+                        }
+                        continue;
+                    }
+                    let [a, b, c] = tri.map(|k| block.screen[k as usize]);
+                    let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                    if hi.x < fx0 || lo.x > fx1 || hi.y < fy0 || lo.y > fy1 {
+                        continue;
+                    }
+                    if let Some(st) = setup(&t, sw, sh, object, true) {
+                        draw(scene, prepared, &st, (x0, y0, x1, y1), lod_tint, &mut buf);
+                    }
+                }
+            }
+        }
+    }
+    buf
+}
+
+/// Rasterizes `tri` into the tile `[x0, x1) x [y0, y1)` whose samples `buf` holds, shading the
+/// fragments that pass the depth test.
+fn draw(
+    scene: &Scene,
+    prepared: &[Prepared],
+    tri: &ScreenTriangle,
+    (x0, y0, x1, y1): (u32, u32, u32, u32),
+    lod_tint: bool,
+    buf: &mut [Option<Sample>],
+) {
+    let tw = x1 - x0;
+    let obj = &scene.objects[tri.object as usize];
+    let prep = &prepared[obj.material];
+    {
         tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
             let slot = &mut buf[((f.y - y0) * tw + (f.x - x0)) as usize];
             // Early depth test with the polygon's depth: the displaced depth is never
@@ -491,7 +724,6 @@ fn shade_tile(
             }
         });
     }
-    buf
 }
 
 /// The fragment stage; `None` discards the fragment (a silhouette ray that left the relief).
@@ -524,6 +756,15 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
     // The full technique (weight > 0) and the normal-mapped fallback (weight < 1).
     let mut hit_uv = v.uv;
     let mut hit_depth = v.depth;
+    if v.depth > 0.0
+        && let Some(surface) = &prep.surface
+    {
+        // Displaced geometry: a triangle is a chord of the surface, and where it passes under
+        // it (over a ridge), shadows traced from the chord would start inside the relief. The
+        // receiver is lifted onto the surface (one fetch), as for steep parallax below.
+        hit_depth = hit_depth.min(surface.depth(v.uv, 0.0));
+        fetches += 1;
+    }
     // How deep the hit lies along the view ray (pixel depth offset): the hit's depth, except
     // under a curved surface.
     let mut ray_depth = v.depth;
@@ -662,30 +903,29 @@ mod tests {
     }
 
     #[test]
-    fn the_displaced_estimate_bounds_the_real_meshes_within_2x() {
+    fn the_displaced_estimate_bounds_the_real_blocks_within_3x_and_stays_small() {
         let scene = demo_scene_sized(32);
         let opts = RenderOptions { width: 48, height: 20, mode: Mode::Displaced, ..Default::default() };
-        let (bound_tris, bound_verts) = geometry_counts(&scene, &opts);
-        let (mut tris, mut largest) = (0u64, 0u64);
-        for obj in &scene.objects {
-            let m = &scene.materials[obj.material];
-            let mesh = match &m.height {
-                Some(f) => {
-                    obj.mesh.try_displaced_for_shading(f, m.edges, m.depth_scale, opts.displaced_edge_texels).unwrap()
-                }
-                None => (*obj.mesh).clone(),
-            };
-            tris += mesh.indices.len() as u64 / 3;
-            largest = largest.max(mesh.positions.len() as u64);
-        }
-        assert!(bound_tris >= tris && bound_tris <= 2 * tris, "{bound_tris} against {tris} triangles");
-        assert!(bound_verts >= largest && bound_verts <= 3 * largest, "{bound_verts} against {largest} vertices");
+        let bound = geometry_counts(&scene, &opts).blocks;
+        let real: usize = scene
+            .objects
+            .iter()
+            .map(|obj| {
+                let m = &scene.materials[obj.material];
+                let f = m.height.as_deref().unwrap();
+                obj.mesh.displaced_blocks(f, m.edges, m.depth_scale, opts.displaced_edge_texels, None).len()
+            })
+            .sum();
+        assert!(bound >= real as u64 && bound <= 3 * real as u64, "{bound} against {real} blocks");
         let est = estimate(&scene, &opts);
-        assert_eq!(
-            est.part("triangles") - est.part("triangles: tile bins"),
-            bound_tris * std::mem::size_of::<ScreenTriangle>() as u64
-        );
-        // And the render itself works.
+        assert_eq!(est.part("displaced blocks"), bound * BLOCK_BYTES);
+        // Streamed, nothing of the subdivision is set up whole: no screen triangles.
+        assert_eq!(geometry_counts(&scene, &opts).triangles, 0);
+        // The demo's reference at 1920x1080 (32 million triangles subdivided) fits in 1 GiB
+        // with room to spare, and the render itself works.
+        let full = demo_scene_sized(512);
+        let big = RenderOptions { width: 1920, height: 1080, ..opts };
+        assert!(estimate(&full, &big).total() < 600 << 20, "{:?}", estimate(&full, &big));
         let out = CpuRenderer::new().render(&scene, &opts, &|_, _| {}).unwrap();
         assert!(out.covered > 0);
     }

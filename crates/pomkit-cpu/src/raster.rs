@@ -95,15 +95,10 @@ pub struct ScreenTriangle {
 /// in a fixed order, so the two triangles sharing an edge get bit-identical new vertices and
 /// no crack opens between them.
 pub fn clip_near(tri: [ClipVertex; 3]) -> Vec<[ClipVertex; 3]> {
-    let near = |c: &ClipVertex| c.clip.z >= 0.0 && c.clip.w > 1e-6;
-    let guard = |c: &ClipVertex| {
-        let g = GUARD_NDC * f64::from(c.clip.w);
-        f64::from(c.clip.x).abs() <= g && f64::from(c.clip.y).abs() <= g
-    };
-    if tri.iter().all(|c| near(c) && guard(c)) {
+    if !needs_clipping(&tri) {
         return vec![tri];
     }
-    if !tri.iter().any(near) {
+    if !tri.iter().any(|c| in_front(c.clip)) {
         return vec![];
     }
     // Sutherland-Hodgman against z >= 0 (which implies w > 0 for a perspective projection),
@@ -138,6 +133,23 @@ pub fn clip_near(tri: [ClipVertex; 3]) -> Vec<[ClipVertex; 3]> {
         }
     }
     (1..poly.len() - 1).map(|k| [poly[0], poly[k], poly[k + 1]]).collect()
+}
+
+/// Whether a clip-space position lies in front of the near plane (and at a positive `w`).
+#[inline]
+fn in_front(c: Vec4) -> bool {
+    c.z >= 0.0 && c.w > 1e-6
+}
+
+/// Whether [`clip_near`] would change the triangle: some vertex lies behind the near plane or
+/// beyond the guard band. A triangle that needs no clipping can go to [`setup`] as it is.
+#[must_use]
+pub fn needs_clipping(tri: &[ClipVertex; 3]) -> bool {
+    let guard = |c: Vec4| {
+        let g = GUARD_NDC * f64::from(c.w);
+        f64::from(c.x).abs() <= g && f64::from(c.y).abs() <= g
+    };
+    !tri.iter().all(|c| in_front(c.clip) && guard(c.clip))
 }
 
 /// The point where edge `a`-`b` crosses the plane `dist = 0`, the same whichever way round the
@@ -252,6 +264,17 @@ impl ScreenTriangle {
         (bary, covered)
     }
 
+    /// Whether the centre of pixel `(x, y)` is covered (top-left rule), as
+    /// [`ScreenTriangle::barycentric`] decides it.
+    #[inline]
+    fn covers(&self, x: u32, y: u32) -> bool {
+        let q = [i64::from(x) * 256 + 128, i64::from(y) * 256 + 128];
+        let [a, b, c] = self.fixed;
+        edge_ok(edge_function(b, c, q), b, c)
+            && edge_ok(edge_function(c, a, q), c, a)
+            && edge_ok(edge_function(a, b, q), a, b)
+    }
+
     /// Perspective-correct varyings and depth at the centre of pixel `(x, y)`.
     fn interpolate(&self, x: u32, y: u32) -> (Varyings, f32, bool) {
         self.interpolate_fixed([i64::from(x) * 256 + 128, i64::from(y) * 256 + 128])
@@ -297,16 +320,20 @@ impl ScreenTriangle {
         while qy < by1 {
             let mut qx = bx0 & !1;
             while qx < bx1 {
-                let mut px = [(Varyings::default(), 0.0f32, false); 4];
-                let mut any = false;
-                for (k, slot) in px.iter_mut().enumerate() {
-                    let (dx, dy) = ((k & 1) as u32, (k >> 1) as u32);
-                    *slot = self.interpolate(qx + dx, qy + dy);
-                    let inside = qx + dx >= x0 && qx + dx < x1 && qy + dy >= y0 && qy + dy < y1;
-                    slot.2 &= inside;
-                    any |= slot.2;
+                // Coverage first (exact integers only): a quad the triangle misses costs no
+                // interpolation.
+                let mut covered = [false; 4];
+                for (k, c) in covered.iter_mut().enumerate() {
+                    let (x, y) = (qx + (k & 1) as u32, qy + (k >> 1) as u32);
+                    *c = x >= x0 && x < x1 && y >= y0 && y < y1 && self.covers(x, y);
                 }
-                if any {
+                if covered.iter().any(|&c| c) {
+                    let mut px = [(Varyings::default(), 0.0f32, false); 4];
+                    for (k, slot) in px.iter_mut().enumerate() {
+                        let (dx, dy) = ((k & 1) as u32, (k >> 1) as u32);
+                        *slot = self.interpolate(qx + dx, qy + dy);
+                        slot.2 = covered[k];
+                    }
                     // Coarse derivatives, as a GPU's ddx/ddy: differences across the quad.
                     let duv_dx = 0.5 * ((px[1].0.uv - px[0].0.uv) + (px[3].0.uv - px[2].0.uv));
                     let duv_dy = 0.5 * ((px[2].0.uv - px[0].0.uv) + (px[3].0.uv - px[1].0.uv));

@@ -339,6 +339,7 @@ impl ViewRenderer {
             mode: Mode::Material,
             aovs: true,
             displaced_edge_texels: 1.0,
+            displaced_tolerance: pomkit_core::render::DISPLACED_TOLERANCE,
             lod_tint: req.overlay == Overlay::LodTint,
         };
         let mut sides = vec![(Mode::Material, "material".to_owned())];

@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use glam::{DVec2, DVec3, Vec2, Vec3};
+use glam::{DVec2, DVec3, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::*;
@@ -149,15 +149,12 @@ impl Mesh {
         let plan = SubdivisionPlan::new(mesh, field.size_f32().as_dvec2(), f64::from(max_edge), max_triangles);
         let (mut out, interpolated_normals) = plan.build(mesh)?;
 
-        // Displacement: along -N by depth * depth_scale * L world units.
-        let ds = f64::from(depth_scale);
-        out.positions.par_iter_mut().zip(&interpolated_normals).zip(&out.uvs).zip(&out.uv_scale).for_each(
-            |(((p, n), uv), s)| {
-                let depth = f64::from(field.sample_bilinear(*uv, edges));
-                let l = f64::from(uv_unit_length(*s));
-                *p = clamp_to_f32(p.as_dvec3() - n.as_dvec3() * (depth * ds * l));
-            },
-        );
+        out.positions
+            .par_iter_mut()
+            .zip(&interpolated_normals)
+            .zip(&out.uvs)
+            .zip(&out.uv_scale)
+            .for_each(|(((p, n), uv), s)| *p = displace(*p, *n, *uv, *s, field, edges, depth_scale).0);
         out.normals = if geometric_normals {
             compute_vertex_normals(&out.positions, &out.indices).unwrap_or(interpolated_normals)
         } else {
@@ -176,15 +173,19 @@ impl Mesh {
 const MAX_EDGE_PARTS: u32 = 1 << 16;
 
 /// Which edges exist, how many parts each gets, and where their new vertices go.
-struct SubdivisionPlan {
+#[derive(Debug)]
+pub(super) struct SubdivisionPlan {
     /// Triangles `[a, b, c]` with three distinct vertices.
-    triangles: Vec<[u32; 3]>,
+    pub(super) triangles: Vec<[u32; 3]>,
     /// Per triangle, the edge ids of `ab`, `ac` and `bc`.
-    triangle_edges: Vec<[u32; 3]>,
+    pub(super) triangle_edges: Vec<[u32; 3]>,
     /// Per edge, its vertices `(lo, hi)` with `lo < hi`.
-    edges: Vec<(u32, u32)>,
+    pub(super) edges: Vec<(u32, u32)>,
     /// Per edge, the number of parts.
-    parts: Vec<u32>,
+    pub(super) parts: Vec<u32>,
+    /// Per triangle, the parts it is split into when a view coarsened it (never fewer than its
+    /// edges' parts); empty: the most of its edges' parts.
+    pub(super) triangle_n: Vec<u32>,
 }
 
 pub(super) fn interior_count(n: u32) -> u64 {
@@ -193,7 +194,7 @@ pub(super) fn interior_count(n: u32) -> u64 {
 }
 
 impl SubdivisionPlan {
-    fn new(mesh: &Mesh, texels: DVec2, max_edge: f64, max_triangles: u64) -> Self {
+    pub(super) fn new(mesh: &Mesh, texels: DVec2, max_edge: f64, max_triangles: u64) -> Self {
         let triangles: Vec<[u32; 3]> = mesh
             .indices
             .chunks_exact(3)
@@ -233,7 +234,7 @@ impl SubdivisionPlan {
         if !fits {
             parts = vec![1; edges.len()];
         }
-        Self { triangles, triangle_edges, edges, parts }
+        Self { triangles, triangle_edges, edges, parts, triangle_n: Vec::new() }
     }
 
     /// Upper bounds on the output's triangles and its exact vertex count.
@@ -246,6 +247,85 @@ impl SubdivisionPlan {
             verts += interior_count(n);
         }
         (tris, verts)
+    }
+
+    /// The parts triangle `t` is split into: the most of its three edges' (unless a view
+    /// coarsened it: [`SubdivisionPlan::triangle_n`]).
+    pub(super) fn triangle_parts(&self, t: usize) -> u32 {
+        match self.triangle_n.get(t) {
+            Some(&n) => n,
+            None => self.edge_parts(t),
+        }
+    }
+
+    /// The most parts of triangle `t`'s three edges.
+    pub(super) fn edge_parts(&self, t: usize) -> u32 {
+        self.triangle_edges[t].iter().map(|&e| self.parts[e as usize]).max().unwrap_or(1)
+    }
+
+    /// Where grid point `(i, j)` of triangle `t` (split into `n` parts) lies: the point
+    /// `a (n - i - j) / n + b i / n + c j / n`, except that on an edge with fewer parts than the
+    /// triangle it snaps to the nearest of the edge's own points (round half up in the
+    /// direction of travel), so that the triangles sharing an edge share its vertices.
+    pub(super) fn grid_point(&self, t: usize, i: u32, j: u32, n: u32) -> GridPoint {
+        let [a, b, c] = self.triangles[t];
+        let [ab, ac, bc] = self.triangle_edges[t];
+        // Parameter k / n from p toward q on edge e.
+        let on_edge = |p: u32, q: u32, e: u32, k: u32| -> GridPoint {
+            let parts = self.parts[e as usize];
+            let kk = ((2 * u64::from(k) * u64::from(parts) + u64::from(n)) / (2 * u64::from(n))) as u32;
+            if kk == 0 {
+                GridPoint::Vertex(p)
+            } else if kk >= parts {
+                GridPoint::Vertex(q)
+            } else {
+                GridPoint::Edge { edge: e, k: if p < q { kk } else { parts - kk } }
+            }
+        };
+        if j == 0 {
+            on_edge(a, b, ab, i)
+        } else if i == 0 {
+            on_edge(a, c, ac, j)
+        } else if i + j == n {
+            on_edge(b, c, bc, j)
+        } else {
+            GridPoint::Interior { i, j }
+        }
+    }
+
+    /// Triangle `t`'s face normal (its first vertex's normal when it has no area).
+    pub(super) fn face(&self, mesh: &Mesh, t: usize) -> Vec3 {
+        let [a, b, c] = self.triangles[t];
+        let (pa, pb, pc) = (mesh.positions[a as usize], mesh.positions[b as usize], mesh.positions[c as usize]);
+        (pb - pa).cross(pc - pa).normalize_or(mesh.normals[a as usize])
+    }
+
+    /// The undisplaced vertex at grid point `g` of triangle `t` (split into `n` parts):
+    /// positions, normals, UVs, tangents and `uv_scale` interpolated from the triangle's corners
+    /// (from the edge's two ends only for a point on an edge).
+    /// `face` is the normal interior points fall back to ([`SubdivisionPlan::face`]).
+    pub(super) fn blend(&self, mesh: &Mesh, t: usize, g: GridPoint, n: u32, face: Vec3) -> Blended {
+        match g {
+            GridPoint::Vertex(v) => {
+                let v = v as usize;
+                Blended {
+                    position: mesh.positions[v],
+                    normal: mesh.normals[v],
+                    uv: mesh.uvs[v],
+                    tangent: mesh.tangents[v],
+                    uv_scale: mesh.uv_scale[v],
+                }
+            }
+            GridPoint::Edge { edge, k } => {
+                let (lo, hi) = self.edges[edge as usize];
+                let t = f64::from(k) / f64::from(self.parts[edge as usize]);
+                blend(mesh, [lo, hi, hi], [1.0 - t, t, 0.0], mesh.normals[lo as usize])
+            }
+            GridPoint::Interior { i, j } => {
+                let w = [f64::from(n - i - j), f64::from(i), f64::from(j)].map(|x| x / f64::from(n));
+                blend(mesh, self.triangles[t], w, face)
+            }
+        }
     }
 
     /// The subdivided, undisplaced mesh (normals interpolated, tangents not yet orthogonalized),
@@ -273,51 +353,34 @@ impl SubdivisionPlan {
             uv_scale: reserved(&mesh.uv_scale, verts).map_err(fail)?,
             indices: reserved(&[], tris.saturating_mul(3)).map_err(fail)?,
         };
+        let push = |out: &mut Mesh, v: Blended| {
+            out.positions.push(v.position);
+            out.normals.push(v.normal);
+            out.uvs.push(v.uv);
+            out.tangents.push(v.tangent);
+            out.uv_scale.push(v.uv_scale);
+            out.positions.len() as u32 - 1
+        };
         // Edge vertices, from lo to hi, computed from the edge's end points only.
         let mut edge_base = Vec::with_capacity(self.edges.len());
-        for (&(lo, hi), &n) in self.edges.iter().zip(&self.parts) {
+        for (e, &n) in self.parts.iter().enumerate() {
             edge_base.push(out.positions.len() as u32);
-            let fallback = mesh.normals[lo as usize];
             for k in 1..n {
-                let t = f64::from(k) / f64::from(n);
-                push_blend(&mut out, mesh, [lo, hi, hi], [1.0 - t, t, 0.0], fallback);
+                push(&mut out, self.blend(mesh, 0, GridPoint::Edge { edge: e as u32, k }, n, Vec3::Z));
             }
         }
-        // The vertex for parameter k / n from p toward q on an edge, snapped to the edge's own
-        // points (round half up in the direction of travel).
-        let edge_vertex = |p: u32, q: u32, e: u32, k: u32, n: u32| -> u32 {
-            let parts = self.parts[e as usize];
-            let kk = ((2 * u64::from(k) * u64::from(parts) + u64::from(n)) / (2 * u64::from(n))) as u32;
-            if kk == 0 {
-                p
-            } else if kk >= parts {
-                q
-            } else if p < q {
-                edge_base[e as usize] + kk - 1
-            } else {
-                edge_base[e as usize] + (parts - kk) - 1
-            }
-        };
         let mut grid: Vec<u32> = Vec::new();
-        for (&[a, b, c], &[ab, ac, bc]) in self.triangles.iter().zip(&self.triangle_edges) {
-            let n = [ab, ac, bc].iter().map(|&e| self.parts[e as usize]).max().unwrap_or(1);
-            let (pa, pb, pc) = (mesh.positions[a as usize], mesh.positions[b as usize], mesh.positions[c as usize]);
-            let face = (pb - pa).cross(pc - pa).normalize_or(mesh.normals[a as usize]);
-            // Grid vertex (i, j) is a (n - i - j) / n + b i / n + c j / n; row j holds i in
-            // 0..=n - j.
+        for t in 0..self.triangles.len() {
+            let n = self.triangle_parts(t);
+            let face = self.face(mesh, t);
+            // Row j of the grid holds i in 0..=n - j.
             grid.clear();
             for j in 0..=n {
                 for i in 0..=n - j {
-                    let v = if j == 0 {
-                        edge_vertex(a, b, ab, i, n)
-                    } else if i == 0 {
-                        edge_vertex(a, c, ac, j, n)
-                    } else if i + j == n {
-                        edge_vertex(b, c, bc, j, n)
-                    } else {
-                        let w = [f64::from(n - i - j), f64::from(i), f64::from(j)].map(|x| x / f64::from(n));
-                        push_blend(&mut out, mesh, [a, b, c], w, face);
-                        out.positions.len() as u32 - 1
+                    let v = match self.grid_point(t, i, j, n) {
+                        GridPoint::Vertex(v) => v,
+                        GridPoint::Edge { edge, k } => edge_base[edge as usize] + k - 1,
+                        g @ GridPoint::Interior { .. } => push(&mut out, self.blend(mesh, t, g, n, face)),
                     };
                     grid.push(v);
                 }
@@ -338,6 +401,44 @@ impl SubdivisionPlan {
     }
 }
 
+/// A point of a triangle's subdivision grid, named so that the triangles sharing it agree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum GridPoint {
+    /// A vertex of the input mesh.
+    Vertex(u32),
+    /// Point `k` (1 ..= parts - 1, counted from the edge's lower vertex index) of an edge.
+    Edge { edge: u32, k: u32 },
+    /// Grid point `(i, j)` inside the triangle.
+    Interior { i: u32, j: u32 },
+}
+
+/// An interpolated, undisplaced vertex.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Blended {
+    pub(super) position: Vec3,
+    pub(super) normal: Vec3,
+    pub(super) uv: Vec2,
+    pub(super) tangent: Vec4,
+    pub(super) uv_scale: Vec2,
+}
+
+/// Moves `p` along `-n` by `depth * depth_scale * L` world units, where `depth` is the field's
+/// bilinear depth at `uv` and `L` = [`uv_unit_length`] of `uv_scale`; returns the moved point
+/// and the depth.
+pub(super) fn displace(
+    p: Vec3,
+    n: Vec3,
+    uv: Vec2,
+    uv_scale: Vec2,
+    field: &HeightField,
+    edges: EdgeMode,
+    depth_scale: f32,
+) -> (Vec3, f32) {
+    let depth = field.sample_bilinear(uv, edges);
+    let l = f64::from(uv_unit_length(uv_scale));
+    (clamp_to_f32(p.as_dvec3() - n.as_dvec3() * (f64::from(depth) * f64::from(depth_scale) * l)), depth)
+}
+
 /// Appends a triangle unless two of its vertices are the same.
 fn push_triangle(indices: &mut Vec<u32>, t: [u32; 3]) {
     if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
@@ -345,9 +446,9 @@ fn push_triangle(indices: &mut Vec<u32>, t: [u32; 3]) {
     }
 }
 
-/// Appends the vertex with barycentric weights `w` of `mesh`'s vertices `v`; its normal falls
-/// back to `fallback_normal` when the interpolated one is zero.
-fn push_blend(out: &mut Mesh, mesh: &Mesh, v: [u32; 3], w: [f64; 3], fallback_normal: Vec3) {
+/// The vertex with barycentric weights `w` of `mesh`'s vertices `v`; its normal falls back to
+/// `fallback_normal` when the interpolated one is zero.
+fn blend(mesh: &Mesh, v: [u32; 3], w: [f64; 3], fallback_normal: Vec3) -> Blended {
     let (mut p, mut n, mut uv, mut t, mut hand, mut s) =
         (DVec3::ZERO, DVec3::ZERO, DVec2::ZERO, DVec3::ZERO, 0.0f64, DVec2::ZERO);
     for (&k, &w) in v.iter().zip(&w) {
@@ -359,9 +460,11 @@ fn push_blend(out: &mut Mesh, mesh: &Mesh, v: [u32; 3], w: [f64; 3], fallback_no
         hand += f64::from(mesh.tangents[k].w) * w;
         s += mesh.uv_scale[k].as_dvec2() * w;
     }
-    out.positions.push(clamp_to_f32(p));
-    out.normals.push(unit_f64(n).and_then(|n| n.as_vec3().try_normalize()).unwrap_or(fallback_normal));
-    out.uvs.push(uv.as_vec2());
-    out.tangents.push(t.as_vec3().extend(if hand < 0.0 { -1.0 } else { 1.0 }));
-    out.uv_scale.push(sane_scale_f64(s));
+    Blended {
+        position: clamp_to_f32(p),
+        normal: unit_f64(n).and_then(|n| n.as_vec3().try_normalize()).unwrap_or(fallback_normal),
+        uv: uv.as_vec2(),
+        tangent: t.as_vec3().extend(if hand < 0.0 { -1.0 } else { 1.0 }),
+        uv_scale: sane_scale_f64(s),
+    }
 }

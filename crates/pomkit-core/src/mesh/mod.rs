@@ -37,7 +37,10 @@ use std::borrow::Cow;
 use glam::{DMat3, DVec2, DVec3, Mat4, Vec2, Vec3, Vec4};
 use thiserror::Error;
 
+mod blocks;
 mod displace;
+
+pub use blocks::{BLOCK_CELLS, DisplacedBlock, DisplacedBlocks, DisplacementView, ScreenBounds};
 mod shapes;
 
 use crate::tangent::{TangentError, TangentMethod, TangentOptions, compute_tangents, compute_vertex_normals};

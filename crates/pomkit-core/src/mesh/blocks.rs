@@ -1,0 +1,765 @@
+//! The displaced reference a block at a time: [`Mesh::displaced_blocks`] hands a renderer the
+//! triangles of [`Mesh::displaced_for_shading`] in small blocks made on demand, so that memory
+//! does not grow with the subdivision, and, given the view, coarsens each block as far as the
+//! picture allows.
+//!
+//! # Coarsening for a view
+//!
+//! With a [`DisplacementView`], a block whose surface is smooth enough on screen is made with
+//! every second, fourth or eighth grid line of the subdivision (its *stride*). The test is
+//! geometric: the coarse surface interpolates the fine one linearly, so at a fine grid point it
+//! is off by `|d - d_coarse| * depth_scale * L` world units along the normal, where `d` is the
+//! field's depth there and `d_coarse` the coarse triangle's interpolation of the depths at its
+//! corners. On screen that is at most `|d - d_coarse|` times the projected length of the full
+//! depth `depth_scale * L` at the block's corners. A block takes the largest stride whose worst
+//! grid point stays within [`DisplacementView::tolerance`] samples; a flat or gently sloping
+//! block far away coarsens, a brick's mortar edge seen close does not.
+//!
+//! Neighbouring blocks may take different strides. Each side a block shares with another has a
+//! stride of its own, decided by the same test on the side's own points and ends (so both blocks
+//! compute the same), never finer than either block's (the side's points and ends are among
+//! each block's); a block's grid points on a coarser side snap to the side's points, as the
+//! subdivision's vertices snap on an edge with fewer parts. So the blocks stay watertight.
+//! Blocks that touch an edge of the input triangle are never coarsened, which leaves the
+//! stitching between input triangles as it is without a view.
+
+use std::borrow::Cow;
+
+use glam::{Mat4, Vec2, Vec3, Vec4};
+use rayon::prelude::*;
+
+use super::displace::{GridPoint, SubdivisionPlan, displace};
+use super::{MAX_DISPLACED_TRIANGLES, MIN_EDGE_TEXELS, Mesh, fix_tangent, uv_unit_length};
+use crate::heightfield::{EdgeMode, HeightField};
+use glam::DVec2;
+
+/// Grid cells per side of a [`DisplacedBlocks`] block: a block holds at most
+/// `2 * BLOCK_CELLS^2` triangles and `(BLOCK_CELLS + 1)^2` vertices.
+pub const BLOCK_CELLS: u32 = 8;
+
+/// The strides a block or side may take, coarsest first (each divides [`BLOCK_CELLS`]).
+const STRIDES: [u32; 3] = [8, 4, 2];
+
+/// The view a [`DisplacedBlocks`] is drawn in, which lets it coarsen where the screen cannot
+/// tell (module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DisplacementView {
+    /// World to clip space (wgpu's conventions: visible depth `0 <= z <= w`), for the mesh the
+    /// blocks are made of.
+    pub view_proj: Mat4,
+    /// The viewport in samples (pixels times supersampling).
+    pub size: Vec2,
+    /// The most samples the coarsened surface may lie from the full subdivision's on screen.
+    pub tolerance: f32,
+}
+
+impl DisplacementView {
+    /// The screen position (samples) of a world point, when it lies in front of the near plane.
+    fn project(&self, p: Vec3) -> Option<Vec2> {
+        let c = self.view_proj * p.extend(1.0);
+        if !(c.z >= 0.0 && c.w > 1e-6 && c.is_finite()) {
+            return None;
+        }
+        Some(Vec2::new((c.x / c.w * 0.5 + 0.5) * self.size.x, (0.5 - c.y / c.w * 0.5) * self.size.y))
+    }
+}
+
+/// The triangles of [`Mesh::displaced_for_shading`], made a small block at a time instead of all
+/// at once, so that a renderer can stream them (generate a block, draw it, forget it). Made by
+/// [`Mesh::displaced_blocks`].
+///
+/// Without a view, the blocks together hold exactly the triangles of
+/// [`Mesh::displaced_for_shading`] with the same arguments, with bit-identical vertices (each
+/// vertex is a function of where it lies in the subdivision, computed the same way by every
+/// block and triangle that shares it, so the blocks are as watertight as the mesh). Block `b` of
+/// triangle `t` covers the cells `i0 <= i < i0 + BLOCK_CELLS`, `j0 <= j < j0 + BLOCK_CELLS` of
+/// its barycentric grid. With a view, blocks may be coarser (module docs).
+#[derive(Debug)]
+pub struct DisplacedBlocks<'a> {
+    mesh: Cow<'a, Mesh>,
+    plan: SubdivisionPlan,
+    field: &'a HeightField,
+    edges: EdgeMode,
+    depth_scale: f32,
+    view: Option<DisplacementView>,
+    /// Per block: the triangle, and the first grid column and row of its cells.
+    blocks: Vec<[u32; 3]>,
+    /// Per block with a view: its strides and maybe its screen bounds (empty without a view).
+    plans: Vec<BlockPlan>,
+    triangles: u64,
+}
+
+/// One block of a [`DisplacedBlocks`]: displaced vertices (with the interpolated normals and
+/// orthogonalized tangents of the undisplaced surface, as [`Mesh::displaced_for_shading`] gives)
+/// and the triangles over them, wound as the input's. Reused from block to block.
+#[derive(Clone, Debug, Default)]
+pub struct DisplacedBlock {
+    /// Displaced positions.
+    pub positions: Vec<Vec3>,
+    /// The undisplaced surface's interpolated normals.
+    pub normals: Vec<Vec3>,
+    /// Texture coordinates.
+    pub uvs: Vec<Vec2>,
+    /// Tangents, perpendicular to `normals`, handedness in `w`.
+    pub tangents: Vec<Vec4>,
+    /// World units per UV unit of the undisplaced surface.
+    pub uv_scale: Vec<Vec2>,
+    /// The field's depth at each vertex (0 = surface, 1 = deepest), as displaced.
+    pub depths: Vec<f32>,
+    /// Triangles, as indices into the vertices.
+    pub triangles: Vec<[u32; 3]>,
+    /// The grid lines the block was made with: 1 (every line of the subdivision), 2, 4 or 8.
+    pub stride: u32,
+    /// Per grid point of the block, its vertex (`u32::MAX`: not made yet) and where it lies.
+    slots: Vec<(u32, GridPoint)>,
+}
+
+/// A block's plan for the view: its stride, its sides' strides (`LEFT`, `RIGHT`, `BOTTOM`,
+/// `TOP`) and, when known without making it, its screen bounds.
+#[derive(Clone, Copy, Debug)]
+struct BlockPlan {
+    stride: u32,
+    sides: [u32; 4],
+    bounds: Option<ScreenBounds>,
+}
+
+/// A box on screen holding a block's projected vertices, and their least depth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScreenBounds {
+    /// The least screen position (samples, y down).
+    pub min: Vec2,
+    /// The greatest screen position.
+    pub max: Vec2,
+    /// The least NDC depth.
+    pub min_z: f32,
+}
+
+/// The sides of a block, in the order [`DisplacedBlocks::strides`] gives their strides.
+const LEFT: usize = 0;
+const RIGHT: usize = 1;
+const BOTTOM: usize = 2;
+const TOP: usize = 3;
+
+impl Mesh {
+    /// [`Mesh::displaced_for_shading`]'s triangles as blocks made on demand
+    /// ([`DisplacedBlocks`]); only the plan (which edge splits into how many parts) and a list
+    /// of blocks (12 bytes per up to `2 * BLOCK_CELLS^2` triangles) are held. With `view`,
+    /// blocks coarsen where it cannot be seen (see [`DisplacementView`]).
+    #[must_use]
+    pub fn displaced_blocks<'a>(
+        &'a self,
+        field: &'a HeightField,
+        edges: EdgeMode,
+        depth_scale: f32,
+        max_edge_texels: f32,
+        view: Option<DisplacementView>,
+    ) -> DisplacedBlocks<'a> {
+        let mesh = self.repaired();
+        let depth_scale = if depth_scale.is_finite() && depth_scale > 0.0 { depth_scale } else { 0.0 };
+        let max_edge = if max_edge_texels.is_nan() { 1.0 } else { max_edge_texels.max(MIN_EDGE_TEXELS) };
+        let plan =
+            SubdivisionPlan::new(&mesh, field.size_f32().as_dvec2(), f64::from(max_edge), MAX_DISPLACED_TRIANGLES);
+        let view = view.filter(|v| v.view_proj.is_finite() && v.size.is_finite() && v.tolerance > 0.0);
+        let mut plan = plan;
+        if let Some(view) = &view {
+            coarsen_plan(&mut plan, &mesh, field, edges, depth_scale, view);
+        }
+        let mut blocks = Vec::new();
+        let mut triangles = 0u64;
+        for t in 0..plan.triangles.len() {
+            let n = plan.triangle_parts(t);
+            triangles += u64::from(n) * u64::from(n);
+            for j0 in (0..n).step_by(BLOCK_CELLS as usize) {
+                for i0 in (0..n - j0).step_by(BLOCK_CELLS as usize) {
+                    blocks.push([t as u32, i0, j0]);
+                }
+            }
+        }
+        let mut out =
+            DisplacedBlocks { mesh, plan, field, edges, depth_scale, view, blocks, plans: Vec::new(), triangles };
+        // Every block's strides, decided once (each is a function of the block alone).
+        if out.view.is_some() {
+            let plans: Vec<BlockPlan> = (0..out.blocks.len())
+                .into_par_iter()
+                .map_init(Vec::new, |fine, b| {
+                    let [t, i0, j0] = out.blocks[b];
+                    let t = t as usize;
+                    let n = out.plan.triangle_parts(t);
+                    let face = out.plan.face(&out.mesh, t);
+                    let (i1, j1) = ((i0 + BLOCK_CELLS).min(n), (j0 + BLOCK_CELLS).min(n));
+                    out.strides(t, [i0, j0, i1, j1], n, face, fine)
+                })
+                .collect();
+            out.plans = plans;
+        }
+        out
+    }
+}
+
+impl DisplacedBlocks<'_> {
+    /// The number of blocks.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.blocks.len()
+    }
+
+    /// Whether there are no blocks (a mesh without triangles).
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.blocks.is_empty()
+    }
+
+    /// An upper bound on the triangles of all blocks together (`n^2` per input triangle split
+    /// into `n` parts).
+    #[must_use]
+    pub fn triangle_bound(&self) -> u64 {
+        self.triangles
+    }
+
+    /// Fills `out` with block `index` (`< len()`; a larger one gives an empty block).
+    pub fn block(&self, index: usize, out: &mut DisplacedBlock) {
+        out.positions.clear();
+        out.normals.clear();
+        out.uvs.clear();
+        out.tangents.clear();
+        out.uv_scale.clear();
+        out.depths.clear();
+        out.triangles.clear();
+        out.slots.clear();
+        out.stride = 1;
+        let Some(&[t, i0, j0]) = self.blocks.get(index) else { return };
+        let (mesh, plan, t) = (self.mesh.as_ref(), &self.plan, t as usize);
+        let n = plan.triangle_parts(t);
+        let face = plan.face(mesh, t);
+        let (i1, j1) = ((i0 + BLOCK_CELLS).min(n), (j0 + BLOCK_CELLS).min(n));
+        let (s, sides) = self.plans.get(index).map_or((1, [1; 4]), |p| (p.stride, p.sides));
+        out.stride = s;
+        let width = (BLOCK_CELLS + 1) as usize;
+        out.slots.resize(width * width, (u32::MAX, GridPoint::Vertex(u32::MAX)));
+        // A grid point on a side coarser than the block moves to the side's nearest point.
+        let snap = |i: u32, j: u32| -> (u32, u32) {
+            let round = |x: u32, from: u32, s: u32| from + (x - from + s / 2) / s * s;
+            if i == i0 && sides[LEFT] > 1 {
+                (i, round(j, j0, sides[LEFT]))
+            } else if i == i1 && sides[RIGHT] > 1 {
+                (i, round(j, j0, sides[RIGHT]))
+            } else if j == j0 && sides[BOTTOM] > 1 {
+                (round(i, i0, sides[BOTTOM]), j)
+            } else if j == j1 && sides[TOP] > 1 {
+                (round(i, i0, sides[TOP]), j)
+            } else {
+                (i, j)
+            }
+        };
+        let vertex = |out: &mut DisplacedBlock, i: u32, j: u32| -> (u32, GridPoint) {
+            let (i, j) = snap(i, j);
+            let slot = (j - j0) as usize * width + (i - i0) as usize;
+            if out.slots[slot].0 == u32::MAX {
+                let g = plan.grid_point(t, i, j, n);
+                let v = plan.blend(mesh, t, g, n, face);
+                let (p, depth) =
+                    displace(v.position, v.normal, v.uv, v.uv_scale, self.field, self.edges, self.depth_scale);
+                out.slots[slot] = (out.positions.len() as u32, g);
+                out.positions.push(p);
+                out.normals.push(v.normal);
+                out.uvs.push(v.uv);
+                out.tangents.push(fix_tangent(v.tangent, v.normal));
+                out.uv_scale.push(v.uv_scale);
+                out.depths.push(depth);
+            }
+            out.slots[slot]
+        };
+        let push = |out: &mut DisplacedBlock, tri: [(u32, GridPoint); 3]| {
+            if tri[0].1 != tri[1].1 && tri[1].1 != tri[2].1 && tri[0].1 != tri[2].1 {
+                out.triangles.push(tri.map(|(v, _)| v));
+            }
+        };
+        // Cells of `s x s` grid cells (only whole blocks inside the triangle coarsen, so with
+        // s > 1 every cell is whole).
+        for j in (j0..j1).step_by(s as usize) {
+            for i in (i0..i1.min(n - j)).step_by(s as usize) {
+                let (a, b, c) = (vertex(out, i, j), vertex(out, i + s, j), vertex(out, i, j + s));
+                push(out, [a, b, c]);
+                if i + j + s < n {
+                    let d = vertex(out, i + s, j + s);
+                    push(out, [b, d, c]);
+                }
+            }
+        }
+    }
+
+    /// The stride of block `[i0, j0, i1, j1]` of triangle `t` (split into `n` parts) and of its
+    /// sides (`LEFT`, `RIGHT`, `BOTTOM`, `TOP`): 1 everywhere without a view.
+    fn strides(&self, t: usize, [i0, j0, i1, j1]: [u32; 4], n: u32, face: Vec3, fine: &mut Vec<f32>) -> BlockPlan {
+        let fine_block = BlockPlan { stride: 1, sides: [1; 4], bounds: None };
+        let Some(view) = &self.view else { return fine_block };
+        let k = BLOCK_CELLS;
+        let whole = i1 == i0 + k && j1 == j0 + k;
+        // A side coarsens when it is whole, inside the triangle and not on its edges; a block
+        // when it is whole and strictly inside.
+        let side_ok = [
+            i0 > 0 && j1 == j0 + k && i0 + j1 <= n,
+            whole && i1 + j1 <= n,
+            j0 > 0 && i1 == i0 + k && i1 + j0 <= n,
+            whole && i1 + j1 <= n,
+        ];
+        let block_ok = whole && i0 > 0 && j0 > 0 && i1 + j1 < n;
+        if !block_ok && !side_ok.iter().any(|&ok| ok) {
+            return fine_block;
+        }
+        let (mesh, plan) = (self.mesh.as_ref(), &self.plan);
+        // The field's depth at every grid point of the block inside the triangle (at the point's
+        // barycentric UV, in f32: a function of the point alone, as both blocks of a side need).
+        let width = (k + 1) as usize;
+        fine.clear();
+        fine.resize(width * width, 0.0);
+        let [ua, ub, uc] = plan.triangles[t].map(|v| mesh.uvs[v as usize]);
+        let inv = 1.0 / n as f32;
+        for j in j0..=j1 {
+            for i in i0..=i1.min(n - j) {
+                let uv = ua + (ub - ua) * (i as f32 * inv) + (uc - ua) * (j as f32 * inv);
+                fine[(j - j0) as usize * width + (i - i0) as usize] = self.field.sample_bilinear(uv, self.edges);
+            }
+        }
+        let f = |a: u32, b: u32| fine[b as usize * width + a as usize];
+        // The corners, undisplaced, and the projected length of the full depth at each, in
+        // samples.
+        let corners = [(i0, j0), (i1, j0), (i0, j1), (i1, j1)];
+        let blended =
+            corners.map(|(i, j)| (i + j <= n).then(|| plan.blend(mesh, t, plan.grid_point(t, i, j, n), n, face)));
+        let reaches: [Option<f32>; 4] = blended.map(|v| {
+            let v = v?;
+            let down = v.normal * (self.depth_scale * uv_unit_length(v.uv_scale));
+            Some(view.project(v.position)?.distance(view.project(v.position - down)?))
+        });
+        let tol = view.tolerance;
+        // Along a side: its points `at(0..=k)` against the straight lines between every s-th.
+        let side = |ends: [usize; 2], at: &dyn Fn(u32) -> f32| -> u32 {
+            let (Some(r0), Some(r1)) = (reaches[ends[0]], reaches[ends[1]]) else { return 1 };
+            let r = r0.max(r1);
+            STRIDES
+                .into_iter()
+                .find(|&s| {
+                    (0..=k).all(|x| {
+                        let c = (x / s * s).min(k - s);
+                        let u = (x - c) as f32 / s as f32;
+                        let line = at(c) + (at(c + s) - at(c)) * u;
+                        (at(x) - line).abs() * r <= tol
+                    })
+                })
+                .unwrap_or(1)
+        };
+        let mut sides = [1; 4];
+        if side_ok[LEFT] {
+            sides[LEFT] = side([0, 2], &|x| f(0, x));
+        }
+        if side_ok[RIGHT] {
+            sides[RIGHT] = side([1, 3], &|x| f(k, x));
+        }
+        if side_ok[BOTTOM] {
+            sides[BOTTOM] = side([0, 1], &|x| f(x, 0));
+        }
+        if side_ok[TOP] {
+            sides[TOP] = side([2, 3], &|x| f(x, k));
+        }
+        if !block_ok {
+            return BlockPlan { stride: 1, sides, bounds: None };
+        }
+        let bounds = self.flat_bounds(t, &blended, fine, view);
+        let Some(r) = reaches.iter().try_fold(0.0f32, |m, r| r.map(|r| m.max(r))) else {
+            return BlockPlan { stride: 1, sides, bounds };
+        };
+        // Over the block: every grid point against the coarse cell's triangle under it, split
+        // along the diagonal from (s, 0) to (0, s) as the cells are.
+        let stride = STRIDES
+            .into_iter()
+            .find(|&s| {
+                (0..=k).all(|b| {
+                    (0..=k).all(|a| {
+                        let (ca, cb) = ((a / s * s).min(k - s), (b / s * s).min(k - s));
+                        let (u, v) = ((a - ca) as f32 / s as f32, (b - cb) as f32 / s as f32);
+                        let (f00, f10, f01) = (f(ca, cb), f(ca + s, cb), f(ca, cb + s));
+                        let coarse = if u + v <= 1.0 {
+                            f00 + (f10 - f00) * u + (f01 - f00) * v
+                        } else {
+                            let f11 = f(ca + s, cb + s);
+                            f11 + (f01 - f11) * (1.0 - u) + (f10 - f11) * (1.0 - v)
+                        };
+                        (f(a, b) - coarse).abs() * r <= tol
+                    })
+                })
+            })
+            .unwrap_or(1);
+        // A side passes wherever its block does (its points and ends are the block's), up to
+        // rounding: the block takes the coarsest stride all of its sides take too, so that a
+        // side's stride, which its other block computes alike, is never finer than the block's.
+        BlockPlan { stride: sides.into_iter().fold(stride, u32::min), sides, bounds }
+    }
+
+    /// Where on screen an interior block of a flat input triangle (one normal and one
+    /// `uv_scale` at its three corners) can be: its vertices are its undisplaced square moved
+    /// along that normal by the depths between the least and the most of its grid points'
+    /// (`fine`), so they lie in the prism over the square's `corners`, whose projection holds
+    /// theirs. `None` for a curved triangle or a prism reaching behind the near plane.
+    fn flat_bounds(
+        &self,
+        t: usize,
+        corners: &[Option<super::displace::Blended>; 4],
+        fine: &[f32],
+        view: &DisplacementView,
+    ) -> Option<ScreenBounds> {
+        let [a, b, c] = self.plan.triangles[t].map(|v| v as usize);
+        let m = self.mesh.as_ref();
+        let same = |x: usize| m.normals[x] == m.normals[a] && m.uv_scale[x] == m.uv_scale[a];
+        if !(same(b) && same(c)) {
+            return None;
+        }
+        let (lo, hi) = fine.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &d| (l.min(d), h.max(d)));
+        let down = m.normals[a] * (self.depth_scale * uv_unit_length(m.uv_scale[a]));
+        let mut out = ScreenBounds { min: Vec2::splat(f32::INFINITY), max: Vec2::splat(f32::NEG_INFINITY), min_z: 1.0 };
+        for v in corners {
+            let p = v.as_ref()?.position;
+            for d in [lo, hi] {
+                let q = p - down * d;
+                let clip = view.view_proj * q.extend(1.0);
+                let s = view.project(q)?;
+                out.min = out.min.min(s);
+                out.max = out.max.max(s);
+                out.min_z = out.min_z.min(clip.z / clip.w);
+            }
+        }
+        Some(out)
+    }
+
+    /// Where block `index` can be on screen, when its plan for the view could tell without
+    /// making it (an interior block of a flat triangle, [`DisplacedBlocks::flat_bounds`]); the
+    /// caller adds a sample of margin for rounding.
+    #[must_use]
+    pub fn screen_bounds(&self, index: usize) -> Option<ScreenBounds> {
+        self.plans.get(index).and_then(|p| p.bounds)
+    }
+}
+
+/// The largest input triangle (in parts a side) that [`coarsen_plan`] coarsens as a whole;
+/// larger ones coarsen block by block.
+const COARSEN_WHOLE_PARTS: u32 = 8 * BLOCK_CELLS;
+
+/// Coarsens the subdivision of small input triangles and of input edges for `view`, by the test
+/// of the module docs: every edge takes the fewest parts (its own, or a half, quarter or eighth
+/// of them, rounded up) whose straight pieces stay within the tolerance of its points, and
+/// every triangle of at most [`COARSEN_WHOLE_PARTS`] parts the fewest whose grid's triangles
+/// stay within it over the fine grid's points, never fewer than its edges' parts. The edges'
+/// points stay functions of the edge alone, so the stitching between triangles holds as before.
+fn coarsen_plan(
+    plan: &mut SubdivisionPlan,
+    mesh: &Mesh,
+    field: &HeightField,
+    edges: EdgeMode,
+    depth_scale: f32,
+    view: &DisplacementView,
+) {
+    // The projected length of the full depth at each input vertex.
+    let reach: Vec<Option<f32>> = (0..mesh.positions.len())
+        .into_par_iter()
+        .map(|v| {
+            let (p, n) = (mesh.positions[v], mesh.normals[v]);
+            let down = n * (depth_scale * uv_unit_length(mesh.uv_scale[v]));
+            Some(view.project(p)?.distance(view.project(p - down)?))
+        })
+        .collect();
+    let depth = |uv: DVec2| field.sample_bilinear(uv.as_vec2(), edges);
+    let tol = view.tolerance;
+    let fine = plan.parts.clone();
+    let coarse: Vec<u32> = plan
+        .edges
+        .par_iter()
+        .zip(&fine)
+        .map(|(&(lo, hi), &p)| {
+            let (Some(r0), Some(r1)) = (reach[lo as usize], reach[hi as usize]) else { return p };
+            let r = r0.max(r1);
+            let (a, b) = (mesh.uvs[lo as usize].as_dvec2(), mesh.uvs[hi as usize].as_dvec2());
+            let at = |t: f64| depth(a * (1.0 - t) + b * t);
+            let fine_depths: Vec<f32> = (0..=p).map(|k| at(f64::from(k) / f64::from(p))).collect();
+            STRIDES
+                .into_iter()
+                .map(|s| p.div_ceil(s))
+                .filter(|&q| q < p)
+                .find(|&q| {
+                    let ends: Vec<f32> = (0..=q).map(|k| at(f64::from(k) / f64::from(q))).collect();
+                    fine_depths.iter().enumerate().all(|(k, &d)| {
+                        let x = k as f64 / f64::from(p) * f64::from(q);
+                        let c = (x.floor() as u32).min(q - 1);
+                        let u = (x - f64::from(c)) as f32;
+                        let line = ends[c as usize] + (ends[c as usize + 1] - ends[c as usize]) * u;
+                        (d - line).abs() * r <= tol
+                    })
+                })
+                .unwrap_or(p)
+        })
+        .collect();
+    let triangle_n: Vec<u32> = (0..plan.triangles.len())
+        .into_par_iter()
+        .map(|t| {
+            let own = plan.triangle_edges[t].iter().map(|&e| coarse[e as usize]).max().unwrap_or(1);
+            let n = plan.triangle_edges[t].iter().map(|&e| fine[e as usize]).max().unwrap_or(1);
+            let verts = plan.triangles[t];
+            let r = verts.iter().try_fold(0.0f32, |m, &v| reach[v as usize].map(|r| m.max(r)));
+            let Some(r) = r.filter(|_| (2..=COARSEN_WHOLE_PARTS).contains(&n)) else { return n };
+            let [ua, ub, uc] = verts.map(|v| mesh.uvs[v as usize].as_dvec2());
+            // The depth at barycentric grid point (i, j) of an m-part grid.
+            let at = |i: u32, j: u32, m: u32| {
+                let m = f64::from(m);
+                depth(ua * ((m - f64::from(i) - f64::from(j)) / m) + ub * (f64::from(i) / m) + uc * (f64::from(j) / m))
+            };
+            let grid = |m: u32| -> Vec<f32> {
+                (0..=m).flat_map(|j| (0..=m - j).map(move |i| (i, j))).map(|(i, j)| at(i, j, m)).collect()
+            };
+            let row = |j: u32, m: u32| (j * (m + 1) - j * j.saturating_sub(1) / 2) as usize;
+            let fine_depths = grid(n);
+            let inside = STRIDES
+                .into_iter()
+                .map(|s| n.div_ceil(s))
+                .filter(|&m| m < n)
+                .find(|&m| {
+                    let ends = grid(m);
+                    let e = |i: u32, j: u32| ends[row(j, m) + i as usize];
+                    (0..=n).all(|j| {
+                        (0..=n - j).all(|i| {
+                            let (x, y) = (
+                                f64::from(i) / f64::from(n) * f64::from(m),
+                                f64::from(j) / f64::from(n) * f64::from(m),
+                            );
+                            let (mut ci, mut cj) = (x.floor() as u32, y.floor() as u32);
+                            if ci + cj >= m {
+                                // On the far edge: the last cell along it.
+                                if ci > 0 {
+                                    ci -= 1
+                                } else {
+                                    cj -= 1
+                                }
+                                if ci + cj >= m {
+                                    if ci > 0 { ci -= 1 } else { cj -= 1 }
+                                }
+                            }
+                            let (fx, fy) = ((x - f64::from(ci)) as f32, (y - f64::from(cj)) as f32);
+                            let coarse = if fx + fy <= 1.0 || ci + cj + 1 >= m {
+                                let f00 = e(ci, cj);
+                                f00 + (e(ci + 1, cj) - f00) * fx + (e(ci, cj + 1) - f00) * fy
+                            } else {
+                                let f11 = e(ci + 1, cj + 1);
+                                f11 + (e(ci, cj + 1) - f11) * (1.0 - fx) + (e(ci + 1, cj) - f11) * (1.0 - fy)
+                            };
+                            (fine_depths[row(j, n) + i as usize] - coarse).abs() * r <= tol
+                        })
+                    })
+                })
+                .unwrap_or(n);
+            inside.max(own)
+        })
+        .collect();
+    plan.parts = coarse;
+    plan.triangle_n = triangle_n;
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashMap;
+
+    use glam::{Vec2, Vec3};
+
+    use super::*;
+    use crate::mesh::TangentMethod;
+    use crate::procedural::{Pattern, generate};
+
+    type Key = [u32; 3];
+
+    fn key(p: Vec3) -> Key {
+        p.to_array().map(f32::to_bits)
+    }
+
+    /// A triangle as its three positions, rotated to start at the least (orientation kept).
+    fn canonical(t: [Vec3; 3]) -> [Key; 3] {
+        let k = t.map(key);
+        let m = (0..3).min_by_key(|&i| k[i]).unwrap_or(0);
+        [k[m], k[(m + 1) % 3], k[(m + 2) % 3]]
+    }
+
+    fn all_blocks(b: &DisplacedBlocks<'_>) -> Vec<DisplacedBlock> {
+        (0..b.len())
+            .map(|i| {
+                let mut out = DisplacedBlock::default();
+                b.block(i, &mut out);
+                out
+            })
+            .collect()
+    }
+
+    fn block_triangles(blocks: &[DisplacedBlock]) -> Vec<[Key; 3]> {
+        blocks.iter().flat_map(|b| b.triangles.iter().map(|t| canonical(t.map(|v| b.positions[v as usize])))).collect()
+    }
+
+    /// A fan of triangles of very different sizes: its edges split into different parts.
+    fn fan() -> Mesh {
+        let mut positions = vec![Vec3::ZERO];
+        let mut uvs = vec![Vec2::splat(0.5)];
+        let rim = [0.05f32, 0.45, 0.1, 0.3, 0.02, 0.4];
+        for (k, r) in rim.iter().enumerate() {
+            let a = k as f32 / rim.len() as f32 * std::f32::consts::TAU;
+            positions.push(Vec3::new(r * a.cos(), 0.0, r * a.sin()));
+            uvs.push(Vec2::splat(0.5) + Vec2::new(a.cos(), a.sin()) * *r);
+        }
+        let k = rim.len() as u32;
+        let indices: Vec<u32> = (0..k).flat_map(|i| [0, 1 + (i + 1) % k, 1 + i]).collect();
+        Mesh::new(positions, None, uvs, indices, TangentMethod::MikkTSpace).unwrap()
+    }
+
+    #[test]
+    fn without_a_view_the_blocks_are_the_displaced_mesh_bit_for_bit() {
+        let field = generate(Pattern::Cobblestones, 48, 40);
+        let meshes = [
+            Mesh::plane(Vec2::new(2.0, 1.5), 3).scale_uvs(Vec2::new(2.0, 1.0)),
+            Mesh::uv_sphere(0.8, 5, 7),
+            Mesh::cube(1.0),
+            fan(),
+        ];
+        for (m, mesh) in meshes.iter().enumerate() {
+            for (edges, max_edge) in [(EdgeMode::Wrap, 1.0), (EdgeMode::Clamp, 0.6), (EdgeMode::Wrap, 3.0)] {
+                let whole = mesh.displaced_for_shading(&field, edges, 0.07, max_edge);
+                let blocks = mesh.displaced_blocks(&field, edges, 0.07, max_edge, None);
+                let made = all_blocks(&blocks);
+                assert!(made.iter().all(|b| b.stride == 1));
+                let mut ours = block_triangles(&made);
+                let mut theirs: Vec<[Key; 3]> = whole
+                    .indices
+                    .chunks_exact(3)
+                    .map(|t| canonical([0, 1, 2].map(|k| whole.positions[t[k] as usize])))
+                    .collect();
+                assert!(ours.len() as u64 <= blocks.triangle_bound());
+                ours.sort_unstable();
+                theirs.sort_unstable();
+                assert_eq!(ours.len(), theirs.len(), "mesh {m}, {edges:?}, {max_edge}");
+                assert!(ours == theirs, "mesh {m}, {edges:?}, {max_edge}: the triangles differ");
+                // Every vertex carries the mesh's attributes at that position.
+                let mut at: HashMap<Key, Vec<(Vec3, Vec2, Vec4)>> = HashMap::new();
+                for v in 0..whole.positions.len() {
+                    at.entry(key(whole.positions[v])).or_default().push((
+                        whole.normals[v],
+                        whole.uvs[v],
+                        whole.tangents[v],
+                    ));
+                }
+                for b in &made {
+                    for v in 0..b.positions.len() {
+                        let want = (b.normals[v], b.uvs[v], b.tangents[v]);
+                        assert!(at[&key(b.positions[v])].contains(&want), "mesh {m}: vertex {v}");
+                        assert_eq!(b.depths[v], field.sample_bilinear(b.uvs[v], edges));
+                    }
+                }
+            }
+        }
+    }
+
+    /// A perspective view of the unit square plane (y = 0) from low over its near edge.
+    fn grazing_view(size: Vec2, tolerance: f32) -> DisplacementView {
+        let camera = crate::scene::Camera {
+            eye: Vec3::new(0.0, 0.35, 1.6),
+            target: Vec3::new(0.0, -0.1, 0.0),
+            up: Vec3::Y,
+            fov_y_deg: 40.0,
+            near: 0.05,
+            far: 20.0,
+        };
+        DisplacementView { view_proj: camera.projection(size.x / size.y) * camera.view(), size, tolerance }
+    }
+
+    /// Asserts that the triangles close up: every directed edge is matched by exactly one in
+    /// the other direction, except the ones on the plane's rim (|x| or |z| at `half`).
+    fn assert_watertight(tris: &[[Key; 3]], half: f32, what: &str) {
+        let mut uses: HashMap<(Key, Key), i32> = HashMap::new();
+        for t in tris {
+            for k in 0..3 {
+                *uses.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
+            }
+        }
+        let on_rim = |p: Key| {
+            let [x, _, z] = p.map(f32::from_bits);
+            (x.abs() - half).abs() < 1e-6 || (z.abs() - half).abs() < 1e-6
+        };
+        for (&(p, q), &n) in &uses {
+            let back = uses.get(&(q, p)).copied().unwrap_or(0);
+            if back == 0 && on_rim(p) && on_rim(q) {
+                assert_eq!(n, 1, "{what}: a rim edge used {n} times");
+                continue;
+            }
+            assert!(n == 1 && back == 1, "{what}: edge {p:?} -> {q:?} used {n} times, back {back} times");
+        }
+    }
+
+    #[test]
+    fn coarsened_blocks_stay_watertight_and_are_fewer_where_the_screen_cannot_tell() {
+        // One big pair of triangles (coarsened block by block) and a grid of small ones
+        // (coarsened whole), under bricks (flat faces, steep mortar) and smooth waves.
+        let size = Vec2::new(480.0, 270.0);
+        for pattern in [Pattern::Bricks, Pattern::Waves] {
+            let field = generate(pattern, 128, 128);
+            for (segments, repeat) in [(1, 2.0), (12, 1.0)] {
+                let plane = Mesh::plane(Vec2::ONE, segments).scale_uvs(Vec2::splat(repeat));
+                let what = format!("{pattern:?}, {segments} segments");
+                let fine = all_blocks(&plane.displaced_blocks(&field, EdgeMode::Wrap, 0.05, 1.0, None));
+                let view = grazing_view(size, 0.125);
+                let blocks = plane.displaced_blocks(&field, EdgeMode::Wrap, 0.05, 1.0, Some(view));
+                let made = all_blocks(&blocks);
+                let tris = block_triangles(&made);
+                assert_watertight(&tris, 0.5, &what);
+                let fine_count: usize = fine.iter().map(|b| b.triangles.len()).sum();
+                assert!(
+                    (tris.len() as f64) < 0.8 * fine_count as f64,
+                    "{what}: {} of {fine_count} triangles",
+                    tris.len()
+                );
+                if segments == 1 {
+                    assert!(made.iter().any(|b| b.stride >= 4), "{what}: no block coarsened to 4");
+                    assert!(made.iter().any(|b| b.stride == 1), "{what}: every block coarsened");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_flat_field_coarsens_fully_and_a_rough_one_seen_close_does_not() {
+        let plane = Mesh::plane(Vec2::ONE, 1).scale_uvs(Vec2::splat(2.0));
+        let view = grazing_view(Vec2::new(960.0, 540.0), 0.125);
+        let flat = HeightField::constant(128, 128, 0.5);
+        let blocks = plane.displaced_blocks(&flat, EdgeMode::Wrap, 0.05, 1.0, Some(view));
+        let made = all_blocks(&blocks);
+        // Every block inside the triangles (not touching their edges) takes the coarsest stride.
+        let interior = made.iter().filter(|b| b.stride == 8).count();
+        assert!(interior as f64 > 0.8 * made.len() as f64, "{interior} of {}", made.len());
+        // Noise of a texel's period, deep and seen from close: no block may coarsen.
+        let rough = HeightField::from_height_fn(128, 128, |x, y| if (x + y) % 2 == 0 { 0.0 } else { 1.0 });
+        let blocks = plane.displaced_blocks(&rough, EdgeMode::Wrap, 0.05, 1.0, Some(view));
+        assert!(all_blocks(&blocks).iter().all(|b| b.stride == 1));
+    }
+
+    #[test]
+    fn known_screen_bounds_hold_every_vertex_of_their_block() {
+        let field = generate(Pattern::Pyramids, 96, 96);
+        let plane = Mesh::plane(Vec2::ONE, 1).scale_uvs(Vec2::splat(3.0));
+        let view = grazing_view(Vec2::new(640.0, 360.0), 0.125);
+        let blocks = plane.displaced_blocks(&field, EdgeMode::Wrap, 0.08, 1.0, Some(view));
+        let mut known = 0;
+        let mut b = DisplacedBlock::default();
+        for i in 0..blocks.len() {
+            let Some(bounds) = blocks.screen_bounds(i) else { continue };
+            known += 1;
+            blocks.block(i, &mut b);
+            for &p in &b.positions {
+                let s = view.project(p).unwrap();
+                let clip = view.view_proj * p.extend(1.0);
+                assert!(s.cmpge(bounds.min - 1e-3).all() && s.cmple(bounds.max + 1e-3).all(), "{s} not in {bounds:?}");
+                assert!(clip.z / clip.w >= bounds.min_z - 1e-6);
+            }
+        }
+        assert!(known as f64 > 0.5 * blocks.len() as f64, "{known} of {} blocks", blocks.len());
+    }
+}
