@@ -378,11 +378,7 @@ fn gpu_backend_takes_every_render_option() {
         }
         let (mean, over) = difference(&rgb(&files[0]), &rgb(&files[1]));
         println!("{extra:?}: GPU vs CPU mean {mean:.3}, {:.3}% over 20", over * 100.0);
-        // The CPU's displaced reference lifts shadow receivers off the chords onto the surface
-        // (pomkit-cpu's shade); the GPU renderer does not yet, which darkens about 2% of this
-        // small frame's pixels under ridges.
-        let allowed = if extra.contains(&"displaced") { 0.03 } else { 0.02 };
-        assert!(mean < 2.0 && over <= allowed, "{extra:?}: GPU and CPU differ: mean {mean:.3}, {over:.4} over 20");
+        assert!(mean < 2.0 && over <= 0.02, "{extra:?}: GPU and CPU differ: mean {mean:.3}, {over:.4} over 20");
     }
     let fetches = image::open(dir.path().join("gpu0.fetches.exr")).unwrap().to_rgb32f();
     assert_eq!(fetches.dimensions(), (64, 48));

@@ -240,7 +240,7 @@ impl HeightField {
         // anyway).
         let (x0, y0) = (f.x as i64, f.y as i64);
         let (w, h) = (i64::from(self.width), i64::from(self.height));
-        if x0 >= 0 && y0 >= 0 && x0 + 1 < w && y0 + 1 < h {
+        if x0 >= 0 && y0 >= 0 && x0 < w - 1 && y0 < h - 1 {
             // Inside: the four texels without edge handling.
             let at = y0 as usize * self.width as usize + x0 as usize;
             let (d00, d10) = (self.depth[at], self.depth[at + 1]);

@@ -338,6 +338,12 @@ fn shade(in: VertexOut, g: Gradients, silhouette: bool) -> Shading {
         weight = pomkit_lod_weight(lod, material.params.lod_threshold);
     }
     var hit = PomkitHit(in.uv, in.depth, 0u);
+    if in.depth > 0.0 && material.has_height != 0u {
+        // Displaced geometry: a triangle is a chord of the surface; where it passes under it
+        // (over a ridge) the shadow rays would start inside the relief, so the receiver is
+        // lifted onto the surface (one fetch), as pomkit-cpu does.
+        hit = PomkitHit(in.uv, min(in.depth, pomkit_depth_at(heights, samp, in.uv, 0.0)), 1u);
+    }
     // How deep the hit lies along the view ray (pixel depth offset): its depth, except under a
     // curved surface.
     var ray_depth = in.depth;
