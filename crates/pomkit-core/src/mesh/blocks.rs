@@ -432,7 +432,7 @@ impl DisplacedBlocks<'_> {
     }
 
     /// Where block `index` can be on screen, when its plan for the view could tell without
-    /// making it (an interior block of a flat triangle, [`DisplacedBlocks::flat_bounds`]); the
+    /// making it (an interior block of a flat triangle, `flat_bounds`); the
     /// caller adds a sample of margin for rounding.
     #[must_use]
     pub fn screen_bounds(&self, index: usize) -> Option<ScreenBounds> {
