@@ -114,7 +114,9 @@ impl CpuRenderer {
         let (sw, sh) = (w * ss, h * ss);
         estimate(scene, opts).check(|| describe_job(opts), &advice(scene, opts))?;
         let prepared = prepare(scene, opts);
-        let triangles = self.triangles(scene, &prepared, opts, sw, sh)?;
+        let aspect = sw as f32 / sh as f32;
+        let vp = scene.camera.projection(aspect) * scene.camera.view();
+        let triangles = self.triangles(scene, &prepared, opts, vp, (sw, sh))?;
         // The displaced reference's height-mapped objects are streamed: their subdivided
         // triangles are made a block at a time, in the tiles that need them, and dropped.
         let worlds: Vec<(u32, Mesh)> = scene
@@ -124,8 +126,6 @@ impl CpuRenderer {
             .filter(|(_, obj)| streamed(&prepared[obj.material], opts))
             .map(|(oi, obj)| (oi as u32, obj.mesh.transformed(obj.transform)))
             .collect();
-        let aspect = sw as f32 / sh as f32;
-        let vp = scene.camera.projection(aspect) * scene.camera.view();
         let view = DisplacementView {
             view_proj: vp,
             size: Vec2::new(sw as f32, sh as f32),
@@ -146,7 +146,7 @@ impl CpuRenderer {
             scene,
             &prepared,
             &triangles,
-            &Streamed { streams: &streams, vp },
+            &Streamed { streams: &streams, view },
             (w, h, ss),
             &mut color,
             opts.aovs.then_some(&mut aovs),
@@ -162,11 +162,9 @@ impl CpuRenderer {
         scene: &Scene,
         prepared: &[Prepared],
         opts: &RenderOptions,
-        sw: u32,
-        sh: u32,
+        vp: Mat4,
+        (sw, sh): (u32, u32),
     ) -> Result<Vec<ScreenTriangle>, MemoryError> {
-        let aspect = sw as f32 / sh as f32;
-        let vp = scene.camera.projection(aspect) * scene.camera.view();
         let tris = geometry_counts(scene, opts).triangles;
         let mut out = Vec::new();
         out.try_reserve_exact(usize::try_from(tris).unwrap_or(usize::MAX)).map_err(|e| MemoryError::Allocation {
@@ -227,10 +225,11 @@ struct Stream<'a> {
     blocks: DisplacedBlocks<'a>,
 }
 
-/// Every [`Stream`] of a frame, and the view-projection that takes their blocks to clip space.
+/// Every [`Stream`] of a frame, and the view they are drawn in (its view-projection takes
+/// their blocks to clip space).
 struct Streamed<'a> {
     streams: &'a [Stream<'a>],
-    vp: Mat4,
+    view: DisplacementView,
 }
 
 /// A block's vertices after the vertex stage, reused from block to block.
@@ -246,14 +245,14 @@ impl Streamed<'_> {
     /// Makes block `b` of stream `s` and runs the vertex stage on it. For displaced geometry
     /// the normals are the undisplaced surface's (`Mesh::displaced_for_shading`): the normal
     /// map adds the bumps, as for every parallax technique.
-    fn vertices(&self, s: usize, b: usize, (sw, sh): (u32, u32), out: &mut BlockVertices) {
+    fn vertices(&self, s: usize, b: usize, out: &mut BlockVertices) {
         self.streams[s].blocks.block(b, &mut out.block);
         let blk = &out.block;
         out.clip.clear();
         out.screen.clear();
         for i in 0..blk.positions.len() {
             let p = blk.positions[i];
-            let clip = self.vp * p.extend(1.0);
+            let clip = self.view.view_proj * p.extend(1.0);
             out.clip.push(ClipVertex {
                 clip,
                 v: Varyings {
@@ -266,8 +265,7 @@ impl Streamed<'_> {
                     curvature: Vec3::ZERO,
                 },
             });
-            let ndc = clip.truncate().truncate() / clip.w;
-            out.screen.push(Vec2::new((ndc.x * 0.5 + 0.5) * sw as f32, (0.5 - ndc.y * 0.5) * sh as f32));
+            out.screen.push(self.view.screen(clip));
         }
     }
 
@@ -298,7 +296,7 @@ impl Streamed<'_> {
         (sw, sh): (u32, u32),
         v: &mut BlockVertices,
     ) -> Option<(Vec2, Vec2, f32)> {
-        self.vertices(s, b, (sw, sh), v);
+        self.vertices(s, b, v);
         let mut lo = Vec2::splat(f32::INFINITY);
         let mut hi = Vec2::splat(f32::NEG_INFINITY);
         let mut min_z = f32::INFINITY;
@@ -662,7 +660,7 @@ fn shade_tile(
         match item {
             Item::Triangle(ti) => draw(scene, prepared, &tris[ti as usize], (x0, y0, x1, y1), lod_tint, &mut buf),
             Item::Block(si, b) => {
-                streamed.vertices(si as usize, b as usize, (sw, sh), &mut block);
+                streamed.vertices(si as usize, b as usize, &mut block);
                 let object = streamed.streams[si as usize].object;
                 // Pixel centres a triangle can cover lie within its vertices' extent.
                 let (fx0, fy0, fx1, fy1) = (x0 as f32 - 1.0, y0 as f32 - 1.0, x1 as f32 + 1.0, y1 as f32 + 1.0);

@@ -54,13 +54,17 @@ pub struct DisplacementView {
 }
 
 impl DisplacementView {
+    /// The screen position (samples, y down) of a clip-space position, divided by its `w`
+    /// whatever its sign (meaningful in front of the near plane only).
+    #[must_use]
+    pub fn screen(&self, c: Vec4) -> Vec2 {
+        Vec2::new((c.x / c.w * 0.5 + 0.5) * self.size.x, (0.5 - c.y / c.w * 0.5) * self.size.y)
+    }
+
     /// The screen position (samples) of a world point, when it lies in front of the near plane.
     fn project(&self, p: Vec3) -> Option<Vec2> {
         let c = self.view_proj * p.extend(1.0);
-        if !(c.z >= 0.0 && c.w > 1e-6 && c.is_finite()) {
-            return None;
-        }
-        Some(Vec2::new((c.x / c.w * 0.5 + 0.5) * self.size.x, (0.5 - c.y / c.w * 0.5) * self.size.y))
+        (c.z >= 0.0 && c.w > 1e-6 && c.is_finite()).then(|| self.screen(c))
     }
 }
 
