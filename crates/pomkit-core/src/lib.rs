@@ -54,6 +54,6 @@ pub use glam;
 pub use heightfield::{EdgeMode, HeightField, HeightFieldError, MipChain, mip_level_from_gradients};
 pub use memory::MAX_SIZE;
 pub use pyramid::MaxHeightPyramid;
-pub use shadow::{Shadow, ShadowMode, ShadowParams, lod_weight, shadow};
+pub use shadow::{Shadow, ShadowMarch, ShadowMode, ShadowParams, ShadowStart, lod_weight, shadow, shadow_start};
 pub use tangent::{TangentError, TangentMethod, TangentOptions, compute_tangents, compute_vertex_normals};
 pub use trace::{Hit, Ray, Surface, Technique, TraceParams, trace};

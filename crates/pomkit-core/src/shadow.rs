@@ -138,11 +138,124 @@ pub fn shadow(
     shadow: &ShadowParams,
     params: &TraceParams,
 ) -> Shadow {
+    match shadow_start(surface, uv, depth, light, shadow, params) {
+        ShadowStart::Done(s) => s,
+        ShadowStart::March(m) => m.run(surface),
+    }
+}
+
+/// Where [`shadow`] stands after its checks: answered already, or a hard or soft march still to
+/// run ([`ShadowMarch::run`], or eight at once with [`crate::trace::packet::shadow_marches`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ShadowStart {
+    /// The visibility, found without a march (or by the exact tracer).
+    Done(Shadow),
+    /// A `hard` or `soft` shadow ray to march.
+    March(ShadowMarch),
+}
+
+/// A `hard` or `soft` shadow ray, ready to march: samples `i = 1 .. n - 1` at the climbed depths
+/// `t_i = depth * i / n`, at UV `uv + s * t_i`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowMarch {
+    /// The receiver's UV, in its own tile where the edges wrap.
+    pub uv: Vec2,
+    /// The receiver's depth, in `(0, 1]`.
+    pub depth: f32,
+    /// UV offset per unit of depth climbed toward the light.
+    pub s: Vec2,
+    /// Samples plus one (the adaptive count of the light's angle).
+    pub n: u32,
+    /// `soft` (a penumbra estimate) rather than `hard`.
+    pub soft: bool,
+    /// The light's tangent of the angle from the normal (`soft`).
+    pub tan_theta: f32,
+    /// The light's elevation above the tangent plane, radians (`soft`).
+    pub light_elevation: f32,
+    /// The light's angular radius, radians (`soft`).
+    pub rho: f32,
+    /// The mip level sampled.
+    pub lod: f32,
+}
+
+impl ShadowMarch {
+    /// The climbed depth of sample `i`.
+    #[inline]
+    #[must_use]
+    pub fn climbed(&self, i: u32) -> f32 {
+        self.depth * i as f32 / self.n as f32
+    }
+
+    /// Marches the ray on `surface`, one sample at a time.
+    #[must_use]
+    pub fn run(&self, surface: &Surface) -> Shadow {
+        let mut slope = f32::NEG_INFINITY;
+        let mut fetches = 0;
+        for i in 1..self.n {
+            let t = self.climbed(i);
+            let d = surface.depth(self.uv + self.s * t, self.lod);
+            fetches += 1;
+            if self.soft {
+                slope = slope.max(self.slope(d, t));
+            } else if self.blocks(d, t) {
+                return Shadow { visibility: 0.0, fetches };
+            }
+        }
+        let visibility = if self.soft { self.soft_visibility(slope) } else { 1.0 };
+        Shadow { visibility, fetches }
+    }
+
+    /// `hard`: whether a profile sample of depth `d` at climbed depth `t` rises above the ray.
+    #[inline]
+    #[must_use]
+    pub fn blocks(&self, d: f32, t: f32) -> bool {
+        d < self.depth - t - 1e-5
+    }
+
+    /// `soft`: the rise of a profile sample of depth `d` above the receiver per unit climbed at
+    /// climbed depth `t` (its elevation seen from the receiver is `atan2(slope, tan_theta)`).
+    #[inline]
+    #[must_use]
+    pub fn slope(&self, d: f32, t: f32) -> f32 {
+        (self.depth - d) / t
+    }
+
+    /// `soft`: the visibility under the steepest sample's `slope` ([`ShadowMarch::slope`];
+    /// `-inf` for no sample).
+    ///
+    /// Each sample's elevation as seen from the receiver, `atan2(depth - d, t * tan_theta)`,
+    /// is set against the light's: nearer blockers subtend more, so they darken more (Tatarchuk
+    /// 2006's distance weighting), and the darkest sample wins. The visibility
+    /// `clamp(0.5 - (elevation - light_elevation) / (2 rho), 0, 1)` falls as the elevation
+    /// rises, and the elevation rises with the slope `(depth - d) / t` (for `t > 0` and
+    /// `tan_theta >= 0`), so the darkest sample is the steepest: one arctangent per ray.
+    #[must_use]
+    pub fn soft_visibility(&self, slope: f32) -> f32 {
+        if slope == f32::NEG_INFINITY {
+            return 1.0;
+        }
+        let elevation = slope.atan2(self.tan_theta);
+        (0.5 - (elevation - self.light_elevation) / (2.0 * self.rho)).clamp(0.0, 1.0)
+    }
+}
+
+/// The checks of [`shadow`], and the exact shadow; the hard and soft marches are returned to
+/// run.
+#[must_use]
+pub fn shadow_start(
+    surface: &Surface,
+    uv: Vec2,
+    depth: f32,
+    light: Vec3,
+    shadow: &ShadowParams,
+    params: &TraceParams,
+) -> ShadowStart {
+    let done = |visibility: f32, fetches: u32| ShadowStart::Done(Shadow { visibility, fetches });
     let Some(l) = unit_direction(light) else {
-        return Shadow { visibility: 1.0, fetches: 0 };
+        return done(1.0, 0);
     };
     if l.z <= 0.0 {
-        return Shadow { visibility: 0.0, fetches: 0 };
+        return done(0.0, 0);
     }
     let l = l.as_vec3();
     // The point in its own tile where the surface repeats (the result is a visibility, so the
@@ -155,44 +268,33 @@ pub fn shadow(
     let depth = if depth.is_finite() { depth.clamp(0.0, 1.0) } else { 0.0 };
     if shadow.mode == ShadowMode::None || depth <= 0.0 {
         // Nothing lies above the polygon's surface: a point on it is never self-shadowed.
-        return Shadow { visibility: 1.0, fetches: 0 };
+        return done(1.0, 0);
     }
     let p = params.sanitized();
     // UV offset per unit of depth climbed toward the light.
     let s = Vec2::new(l.x, l.y) * (surface.depth_scale() / l.z.max(MIN_COS));
     match shadow.mode {
-        ShadowMode::None => Shadow { visibility: 1.0, fetches: 0 },
+        ShadowMode::None => done(1.0, 0),
         // McGuire 2005's fur and grass: darker the deeper, no light ray.
-        ShadowMode::Depth => Shadow { visibility: 1.0 - depth, fetches: 0 },
+        ShadowMode::Depth => done(1.0 - depth, 0),
         ShadowMode::Hard | ShadowMode::Soft => {
-            let n = adaptive_samples(l.z, p.min_samples, p.max_samples);
             // Samples at climbed depths t_i = depth * i / n, i = 1 .. n - 1: the last point lies
             // on the polygon's surface, which nothing rises above.
-            let soft = shadow.mode == ShadowMode::Soft;
-            let rho = if shadow.softness.is_finite() { shadow.softness.max(1e-4) } else { 0.1 };
+            let n = adaptive_samples(l.z, p.min_samples, p.max_samples);
             // The light's elevation above the tangent plane, and the horizontal distance
             // (in depth units) covered per unit climbed.
             let tan_theta = (1.0 - l.z * l.z).max(0.0).sqrt() / l.z;
-            let light_elevation = (1.0f32).atan2(tan_theta);
-            let mut visibility = 1.0f32;
-            let mut fetches = 0;
-            for i in 1..n {
-                let t = depth * i as f32 / n as f32;
-                let d = surface.depth(uv + s * t, p.lod);
-                fetches += 1;
-                if soft {
-                    // Elevation of this profile sample as seen from the receiver, against the
-                    // light's: the blocker's height above the light ray over its distance.
-                    // Nearer blockers subtend more, so they darken more (Tatarchuk 2006's
-                    // distance weighting); the darkest sample is kept.
-                    let elevation = (depth - d).atan2(t * tan_theta);
-                    let v = (0.5 - (elevation - light_elevation) / (2.0 * rho)).clamp(0.0, 1.0);
-                    visibility = visibility.min(v);
-                } else if d < depth - t - 1e-5 {
-                    return Shadow { visibility: 0.0, fetches };
-                }
-            }
-            Shadow { visibility, fetches }
+            ShadowStart::March(ShadowMarch {
+                uv,
+                depth,
+                s,
+                n,
+                soft: shadow.mode == ShadowMode::Soft,
+                tan_theta,
+                light_elevation: (1.0f32).atan2(tan_theta),
+                rho: if shadow.softness.is_finite() { shadow.softness.max(1e-4) } else { 0.1 },
+                lod: p.lod,
+            })
         }
         ShadowMode::Exact => {
             let f = surface.field();
@@ -207,7 +309,7 @@ pub fn shadow(
             let o = DVec3::new(f64::from(uv.x) * size.0, f64::from(uv.y) * size.1, z0);
             let d = DVec3::new(f64::from(s.x) * size.0, f64::from(s.y) * size.1, -1.0);
             let r = exact_first_hit(surface, o, d, eps.min(z0), z0);
-            Shadow { visibility: if r.t.is_some() { 0.0 } else { 1.0 }, fetches: r.fetches + 1 }
+            done(if r.t.is_some() { 0.0 } else { 1.0 }, r.fetches + 1)
         }
     }
 }

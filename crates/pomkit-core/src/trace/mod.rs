@@ -25,6 +25,7 @@ use crate::heightfield::{EdgeMode, HeightField, MipChain};
 use crate::pyramid::MaxHeightPyramid;
 
 mod exact;
+pub mod packet;
 mod surface;
 
 pub(crate) use exact::*;
