@@ -27,17 +27,20 @@
 //! ```
 
 pub mod raster;
+pub mod simd;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use fearless_simd::{Level, Simd, dispatch};
 use glam::{Mat4, Vec2, Vec3, Vec4};
 use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals};
 use pomkit_core::mesh::{DisplacedBlock, DisplacedBlocks, DisplacementView, Mesh, tangent_ray};
 use pomkit_core::scene::{Light, Material, NormalMap, Scene, Texture};
-use pomkit_core::shadow::{ShadowMode, lod_weight, shadow};
+use pomkit_core::shadow::{Shadow, ShadowMode, ShadowStart, lod_weight, shadow, shadow_start};
 use pomkit_core::silhouette::{trace_curved, vertex_curvature, view_curvature};
-use pomkit_core::trace::{Ray, Surface, Technique, TraceParams, sanitized_depth_scale, trace};
+use pomkit_core::trace::packet::{self, LANES};
+use pomkit_core::trace::{Hit, Ray, Surface, Technique, TraceParams, sanitized_depth_scale, trace};
 use pomkit_core::{EdgeMode, mip_level_from_gradients};
 use rayon::prelude::*;
 
@@ -47,6 +50,7 @@ pub use pomkit_core::render::{
 };
 
 use raster::{ClipVertex, Fragment, ScreenTriangle, Varyings, clip_near, needs_clipping, setup};
+pub use simd::{SIMD_ENV, Simd8, SimdEnvError, cpu_features};
 
 /// A material prepared for shading: surfaces, mip chains, normal maps.
 struct Prepared {
@@ -79,18 +83,38 @@ fn sample_albedo(chain: &[Texture], uv: Vec2, lod: f32, edges: EdgeMode) -> Vec3
 }
 
 /// The CPU renderer: `CpuRenderer::new()` then `render(&scene, &options)`.
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Copy)]
 pub struct CpuRenderer {
-    _private: (),
+    simd: Simd8,
+}
+
+impl Default for CpuRenderer {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 const TILE: u32 = 32;
 
 impl CpuRenderer {
-    /// A renderer.
+    /// A renderer shading with the best SIMD level of this CPU, or the one `POMKIT_SIMD` asks
+    /// for ([`Simd8::from_env`]; a value it does not know is ignored here, and reported by
+    /// [`Simd8::from_env`] itself).
     #[must_use]
     pub fn new() -> Self {
-        Self::default()
+        Self { simd: Simd8::from_env().unwrap_or_else(|_| Simd8::detect()) }
+    }
+
+    /// A renderer shading its packets with `simd`.
+    #[must_use]
+    pub fn with_simd(simd: Simd8) -> Self {
+        Self { simd }
+    }
+
+    /// The SIMD level the renderer shades with.
+    #[must_use]
+    pub fn simd(&self) -> Simd8 {
+        self.simd
     }
 
     /// Renders `scene`, calling `progress(done, total)` as tiles finish.
@@ -150,7 +174,7 @@ impl CpuRenderer {
             (w, h, ss),
             &mut color,
             opts.aovs.then_some(&mut aovs),
-            opts.lod_tint,
+            Shading { level: self.simd.level, lod_tint: opts.lod_tint },
             progress,
         )?;
         Ok(RenderOutput { width: w, height: h, color, aovs: opts.aovs.then_some(aovs), covered })
@@ -523,7 +547,7 @@ fn shade_bands(
     (w, h, ss): (u32, u32, u32),
     color: &mut [Vec3],
     aovs: Option<&mut Aovs>,
-    lod_tint: bool,
+    shading: Shading,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<usize, MemoryError> {
     let (sw, sh) = (w * ss, h * ss);
@@ -613,7 +637,7 @@ fn shade_bands(
                         &bins[(by * tx + bx) as usize],
                         (bx, by),
                         (sw, sh),
-                        lod_tint,
+                        shading,
                     );
                     let n = done.fetch_add(1, Ordering::Relaxed) + 1;
                     progress(n, total);
@@ -649,7 +673,7 @@ fn shade_tile(
     bin: &[(f32, Item)],
     (bx, by): (u32, u32),
     (sw, sh): (u32, u32),
-    lod_tint: bool,
+    shading: Shading,
 ) -> Vec<Option<Sample>> {
     let (x0, y0) = (bx * TILE, by * TILE);
     let (x1, y1) = ((x0 + TILE).min(sw), (y0 + TILE).min(sh));
@@ -658,7 +682,7 @@ fn shade_tile(
     let mut block = BlockVertices::default();
     for &(_, item) in bin {
         match item {
-            Item::Triangle(ti) => draw(scene, prepared, &tris[ti as usize], (x0, y0, x1, y1), lod_tint, &mut buf),
+            Item::Triangle(ti) => draw(scene, prepared, &tris[ti as usize], (x0, y0, x1, y1), shading, &mut buf),
             Item::Block(si, b) => {
                 streamed.vertices(si as usize, b as usize, &mut block);
                 let object = streamed.streams[si as usize].object;
@@ -669,7 +693,7 @@ fn shade_tile(
                     if needs_clipping(&t) {
                         for c in clip_near(t) {
                             if let Some(st) = setup(&c, sw, sh, object, true) {
-                                draw(scene, prepared, &st, (x0, y0, x1, y1), lod_tint, &mut buf);
+                                draw(scene, prepared, &st, (x0, y0, x1, y1), shading, &mut buf);
                             }
                         }
                         continue;
@@ -680,7 +704,7 @@ fn shade_tile(
                         continue;
                     }
                     if let Some(st) = setup(&t, sw, sh, object, true) {
-                        draw(scene, prepared, &st, (x0, y0, x1, y1), lod_tint, &mut buf);
+                        draw(scene, prepared, &st, (x0, y0, x1, y1), shading, &mut buf);
                     }
                 }
             }
@@ -690,45 +714,91 @@ fn shade_tile(
 }
 
 /// Rasterizes `tri` into the tile `[x0, x1) x [y0, y1)` whose samples `buf` holds, shading the
-/// fragments that pass the depth test.
+/// fragments that pass the depth test eight at a time ([`shade_packet`]).
 fn draw(
     scene: &Scene,
     prepared: &[Prepared],
     tri: &ScreenTriangle,
     (x0, y0, x1, y1): (u32, u32, u32, u32),
-    lod_tint: bool,
+    shading: Shading,
     buf: &mut [Option<Sample>],
 ) {
     let tw = x1 - x0;
     let obj = &scene.objects[tri.object as usize];
     let prep = &prepared[obj.material];
-    {
-        tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
-            let slot = &mut buf[((f.y - y0) * tw + (f.x - x0)) as usize];
-            // Early depth test with the polygon's depth: the displaced depth is never
-            // nearer, so a fragment behind the stored one stays behind.
-            if slot.is_some_and(|s| s.z <= f.z) {
-                return;
-            }
+    let mut packet: Vec<Fragment> = Vec::with_capacity(LANES);
+    let mut slots = [0usize; LANES];
+    let flush = |packet: &mut Vec<Fragment>, slots: &[usize; LANES], buf: &mut [Option<Sample>]| {
+        let mut out = [None; LANES];
+        let level = shading.level;
+        dispatch!(level, simd => shade_packet(simd, scene, prep, packet, &mut out));
+        for (k, s) in out.into_iter().enumerate().take(packet.len()) {
             // A silhouette pixel whose ray leaves the relief is discarded: it writes nothing.
-            let Some(mut s) = shade(scene, prep, f) else { return };
-            if lod_tint && prep.surface.is_some() {
+            let Some(mut s) = s else { continue };
+            if shading.lod_tint && prep.surface.is_some() {
                 let w = lod_weight(s.lod, prep.material.lod_threshold);
                 let tint = Vec3::new(1.0, 0.25, 0.2).lerp(Vec3::new(0.25, 1.0, 0.3), w);
                 s.color = s.color * 0.5 + tint * 0.5 * s.color.length().max(0.05);
             }
+            let slot = &mut buf[slots[k]];
             if slot.is_none_or(|old| s.z < old.z) {
                 *slot = Some(s);
             }
-        });
+        }
+        packet.clear();
+    };
+    tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
+        let at = ((f.y - y0) * tw + (f.x - x0)) as usize;
+        // Early depth test with the polygon's depth: the displaced depth is never nearer, so a
+        // fragment behind the stored one stays behind. The fragments of one triangle cover
+        // distinct samples, so the test may run before the packet's earlier fragments land.
+        if buf[at].is_some_and(|s| s.z <= f.z) {
+            return;
+        }
+        slots[packet.len()] = at;
+        packet.push(*f);
+        if packet.len() == LANES {
+            flush(&mut packet, &slots, buf);
+        }
+    });
+    if !packet.is_empty() {
+        flush(&mut packet, &slots, buf);
     }
 }
 
-/// The fragment stage; `None` discards the fragment (a silhouette ray that left the relief).
-fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
+/// How the fragments of a frame are shaded: the SIMD level of the packets, and the LOD tint.
+#[derive(Clone, Copy, Debug)]
+struct Shading {
+    level: Level,
+    lod_tint: bool,
+}
+
+/// A fragment's state between the stages of [`shade`]: its tangent frame, view ray and level of
+/// detail, and where its ray met the relief.
+#[derive(Clone, Copy, Debug)]
+struct Lane {
+    n: Vec3,
+    t: Vec3,
+    b: Vec3,
+    tangent: Vec4,
+    to_eye: Vec3,
+    /// Mip level of the height map, and the weight of the full technique in the LOD fade.
+    lod: f32,
+    weight: f32,
+    /// The view ray in tangent space.
+    dir: Vec3,
+    hit_uv: Vec2,
+    hit_depth: f32,
+    /// How deep the hit lies along the view ray (pixel depth offset).
+    ray_depth: f32,
+    fetches: u32,
+}
+
+/// The fragment stage up to the trace: the tangent frame, the eye direction, the mip level and
+/// the view ray.
+fn begin(scene: &Scene, prep: &Prepared, f: &Fragment) -> Lane {
     let m = &prep.material;
     let v = &f.v;
-    let cam = &scene.camera;
     // Tangent frame, re-orthonormalized after interpolation (Lengyel Listing 7.8).
     let n = v.normal.try_normalize().unwrap_or(Vec3::Z);
     let t_raw = v.tangent.truncate();
@@ -736,10 +806,7 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
     let sign = if v.tangent.w < 0.0 { -1.0 } else { 1.0 };
     let b = n.cross(t) * sign;
     let tangent = Vec4::new(t.x, t.y, t.z, sign);
-    let to_eye = (cam.eye - v.world).try_normalize().unwrap_or(n);
-    let params = prep.params;
-    let edges = prep.edges;
-
+    let to_eye = (scene.camera.eye - v.world).try_normalize().unwrap_or(n);
     // Mip level of the height map from the quad's UV gradients, fixed before any loop.
     let (lod, weight) = match &prep.surface {
         Some(s) => {
@@ -750,57 +817,212 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
         None => (0.0, 0.0),
     };
     let dir = tangent_ray(-to_eye, n, tangent, v.uv_scale);
-    let mut fetches = 0u32;
-    // The full technique (weight > 0) and the normal-mapped fallback (weight < 1).
-    let mut hit_uv = v.uv;
-    let mut hit_depth = v.depth;
+    let mut lane = Lane {
+        n,
+        t,
+        b,
+        tangent,
+        to_eye,
+        lod,
+        weight,
+        dir,
+        hit_uv: v.uv,
+        hit_depth: v.depth,
+        ray_depth: v.depth,
+        fetches: 0,
+    };
     if v.depth > 0.0
         && let Some(surface) = &prep.surface
     {
         // Displaced geometry: a triangle is a chord of the surface, and where it passes under
         // it (over a ridge), shadows traced from the chord would start inside the relief. The
         // receiver is lifted onto the surface (one fetch), as for steep parallax below.
-        hit_depth = hit_depth.min(surface.depth(v.uv, 0.0));
-        fetches += 1;
+        lane.hit_depth = lane.hit_depth.min(surface.depth(v.uv, 0.0));
+        lane.fetches += 1;
     }
-    // How deep the hit lies along the view ray (pixel depth offset): the hit's depth, except
-    // under a curved surface.
-    let mut ray_depth = v.depth;
-    // With silhouettes the ray is traced even where the LOD fade shows normal mapping only:
-    // the relief's outline is decided there too (the rim of a curved mesh, seen at grazing
-    // angles, is where the mip level is highest).
-    if let (Some(surface), true) = (&prep.surface, (weight > 0.0 || silhouettes(prep)) && prep.technique.displaces()) {
-        let p = TraceParams { lod, ..params };
-        let ray = Ray::new(v.uv, dir);
+    lane
+}
+
+/// Whether the fragment's view ray is traced. With silhouettes the ray is traced even where
+/// the LOD fade shows normal mapping only: the relief's outline is decided there too (the rim
+/// of a curved mesh, seen at grazing angles, is where the mip level is highest).
+fn traces(prep: &Prepared, lane: &Lane) -> bool {
+    prep.surface.is_some() && (lane.weight > 0.0 || silhouettes(prep)) && prep.technique.displaces()
+}
+
+/// Takes the trace's `hit` into `lane` (its `ray_depth` already set where the ray is curved).
+fn take_hit(prep: &Prepared, surface: &Surface, lane: &mut Lane, hit: &Hit) {
+    if !silhouettes(prep) {
+        lane.ray_depth = hit.depth;
+    }
+    lane.hit_uv = hit.uv;
+    lane.hit_depth = hit.depth;
+    lane.fetches += hit.fetches;
+    if prep.technique == Technique::Steep {
+        // Steep parallax stops on the first plane *below* the surface, up to one plane
+        // spacing deep. Shadows traced from there start inside the relief and darken in
+        // contour rings; lift the receiver onto the surface (one more fetch).
+        let lifted = lane.hit_depth.min(surface.depth(lane.hit_uv, lane.lod));
+        // The lift moves the point up the view ray as well (pixel depth offset).
+        lane.ray_depth = if silhouettes(prep) { lane.ray_depth - (lane.hit_depth - lifted) } else { lifted };
+        lane.hit_depth = lifted;
+        lane.fetches += 1;
+    }
+}
+
+/// The fragment stage for one fragment; `None` discards it (a silhouette ray that left the
+/// relief).
+fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
+    let mut lane = begin(scene, prep, f);
+    if traces(prep, &lane)
+        && let Some(surface) = &prep.surface
+    {
+        let p = TraceParams { lod: lane.lod, ..prep.params };
+        let ray = Ray::new(f.v.uv, lane.dir);
         let hit = if silhouettes(prep) {
-            let c = view_curvature(-to_eye, n, tangent, v.curvature, prep.depth_scale);
+            let c = view_curvature(-lane.to_eye, lane.n, lane.tangent, f.v.curvature, prep.depth_scale);
             let curved = trace_curved(surface, &ray, prep.technique, &p, c);
             if curved.left {
                 return None;
             }
-            ray_depth = curved.ray_depth;
+            lane.ray_depth = curved.ray_depth;
             curved.hit
         } else {
-            let hit = trace(surface, &ray, prep.technique, &p);
-            ray_depth = hit.depth;
-            hit
+            trace(surface, &ray, prep.technique, &p)
         };
-        hit_uv = hit.uv;
-        hit_depth = hit.depth;
-        fetches += hit.fetches;
-        if prep.technique == Technique::Steep {
-            // Steep parallax stops on the first plane *below* the surface, up to one plane
-            // spacing deep. Shadows traced from there start inside the relief and darken in
-            // contour rings; lift the receiver onto the surface (one more fetch).
-            let lifted = hit_depth.min(surface.depth(hit_uv, lod));
-            // The lift moves the point up the view ray as well (pixel depth offset).
-            ray_depth = if silhouettes(prep) { ray_depth - (hit_depth - lifted) } else { lifted };
-            hit_depth = lifted;
-            fetches += 1;
+        take_hit(prep, surface, &mut lane, &hit);
+    }
+    Some(finish(scene, prep, f, &lane, |_, surface, light| {
+        shadow(
+            surface,
+            lane.hit_uv,
+            lane.hit_depth,
+            light,
+            &prep.material.shadow,
+            &TraceParams { lod: lane.lod, ..prep.params },
+        )
+    }))
+}
+
+/// Up to [`LANES`] fragments of one triangle shaded at once: their view rays traced as a
+/// packet ([`pomkit_core::trace::packet`]) and their hard and soft shadow rays marched as
+/// packets, the rest lane by lane. Lane `i` of `out` is `shade(scene, prep, &frags[i])`, bit
+/// for bit (the packet tracers are the single-ray ones).
+#[inline(always)]
+fn shade_packet<S: Simd>(
+    simd: S,
+    scene: &Scene,
+    prep: &Prepared,
+    frags: &[Fragment],
+    out: &mut [Option<Sample>; LANES],
+) {
+    let Some(surface) = prep.surface.as_deref().filter(|_| !silhouettes(prep)) else {
+        // Curved rays (silhouettes) and materials without a height map: one at a time.
+        for (o, f) in out.iter_mut().zip(frags) {
+            *o = shade(scene, prep, f);
+        }
+        return;
+    };
+    let mut lanes: [Option<Lane>; LANES] = [None; LANES];
+    let mut rays = [None; LANES];
+    let mut lods = [0.0; LANES];
+    for (i, f) in frags.iter().enumerate() {
+        let lane = begin(scene, prep, f);
+        if traces(prep, &lane) {
+            rays[i] = Some(Ray::new(f.v.uv, lane.dir));
+        }
+        lods[i] = lane.lod;
+        lanes[i] = Some(lane);
+    }
+    if rays.iter().any(Option::is_some) {
+        let hits = packet::trace_packet(simd, surface, &rays, prep.technique, &prep.params, lods);
+        for (lane, hit) in lanes.iter_mut().zip(&hits) {
+            if let (Some(lane), Some(hit)) = (lane, hit) {
+                take_hit(prep, surface, lane, hit);
+            }
         }
     }
+    // Every light's shadow rays, a packet per light; the hard and soft ones marched together.
+    let m = &prep.material;
+    let mut shadows: Vec<[Option<Shadow>; LANES]> = Vec::with_capacity(scene.lights.len());
+    for light in &scene.lights {
+        let mut done = [None; LANES];
+        let mut marches = [None; LANES];
+        for (i, (lane, f)) in lanes.iter().zip(frags).enumerate() {
+            let Some(lane) = lane else { continue };
+            let Some(lt) = shadow_ray(prep, lane, f, light) else { continue };
+            let p = TraceParams { lod: lane.lod, ..prep.params };
+            match shadow_start(surface, lane.hit_uv, lane.hit_depth, lt, &m.shadow, &p) {
+                ShadowStart::Done(s) => done[i] = Some(s),
+                ShadowStart::March(march) => marches[i] = Some(march),
+            }
+        }
+        if marches.iter().any(Option::is_some) {
+            let marched = packet::shadow_marches(simd, surface, &marches);
+            for (d, s) in done.iter_mut().zip(marched) {
+                if s.is_some() {
+                    *d = s;
+                }
+            }
+        }
+        shadows.push(done);
+    }
+    for (i, (lane, f)) in lanes.iter().zip(frags).enumerate() {
+        if let Some(lane) = lane {
+            out[i] = Some(finish(scene, prep, f, lane, |li, _, _| {
+                shadows[li][i].unwrap_or(Shadow { visibility: 1.0, fetches: 0 })
+            }));
+        }
+    }
+}
+
+/// The direction toward `light` from the fragment, and the radiance arriving.
+fn light_at(light: &Light, world: Vec3) -> (Vec3, Vec3) {
+    match *light {
+        Light::Directional { direction, color, intensity } => {
+            (direction.try_normalize().unwrap_or(Vec3::Y), color * intensity)
+        }
+        Light::Point { position, color, intensity } => {
+            let d = position - world;
+            let d2 = d.length_squared().max(1e-8);
+            (d / d2.sqrt(), color * intensity / d2)
+        }
+    }
+}
+
+/// Whether the fragment traces a shadow ray toward `light` in the full technique, and its
+/// tangent-space direction.
+fn shadow_ray(prep: &Prepared, lane: &Lane, f: &Fragment, light: &Light) -> Option<Vec3> {
+    let (l, _) = light_at(light, f.v.world);
+    let traced = shadows(prep) && lane.weight > 0.0 && lane.n.dot(l) > 0.0;
+    // tangent_ray maps a direction of travel; toward the light it is the same map.
+    (traced && prep.material.shadow.mode != ShadowMode::None && prep.surface.is_some())
+        .then(|| tangent_ray(l, lane.n, lane.tangent, f.v.uv_scale))
+}
+
+/// Whether the material's full technique casts self-shadows.
+fn shadows(prep: &Prepared) -> bool {
+    prep.technique.displaces() || prep.material.height.is_some() && prep.technique != Technique::Flat
+}
+
+/// The fragment stage after the trace: textures at the hit, lighting with the shadows
+/// `shadow_of(light index, surface, tangent-space light direction)` gives, the LOD fade and the
+/// pixel depth offset.
+fn finish(
+    scene: &Scene,
+    prep: &Prepared,
+    f: &Fragment,
+    lane: &Lane,
+    mut shadow_of: impl FnMut(usize, &Surface, Vec3) -> Shadow,
+) -> Sample {
+    let m = &prep.material;
+    let v = &f.v;
+    let cam = &scene.camera;
+    let (n, t, b, to_eye) = (lane.n, lane.t, lane.b, lane.to_eye);
+    let edges = prep.edges;
+    let mut fetches = lane.fetches;
     let albedo_lod = albedo_level(&prep.albedo, f.duv_dx, f.duv_dy);
-    let lit = |uv: Vec2, depth: f32, with_shadows: bool, fetches: &mut u32| -> (Vec3, f32) {
+    let mut lit = |uv: Vec2, with_shadows: bool, fetches: &mut u32| -> (Vec3, f32) {
         let base = sample_albedo(&prep.albedo, uv, albedo_lod, edges) * m.base_color;
         let shading_n = match (&prep.normals, prep.technique) {
             (Some(nm), tq) if tq != Technique::Flat => {
@@ -812,26 +1034,17 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
         let mut c = scene.ambient * base;
         let mut first_vis = 1.0;
         for (li, light) in scene.lights.iter().enumerate() {
-            let (l, radiance) = match *light {
-                Light::Directional { direction, color, intensity } => {
-                    (direction.try_normalize().unwrap_or(Vec3::Y), color * intensity)
-                }
-                Light::Point { position, color, intensity } => {
-                    let d = position - v.world;
-                    let d2 = d.length_squared().max(1e-8);
-                    (d / d2.sqrt(), color * intensity / d2)
-                }
-            };
+            let (l, radiance) = light_at(light, v.world);
             let n_dot_l = n.dot(l);
             let mut vis = if n_dot_l > 0.0 { 1.0 } else { 0.0 };
-            if with_shadows && n_dot_l > 0.0 && m.shadow.mode != ShadowMode::None {
-                if let Some(surface) = &prep.surface {
-                    let lt = tangent_ray(l, n, tangent, v.uv_scale);
-                    // tangent_ray maps a direction of travel; toward the light it is the same map.
-                    let sh = shadow(surface, uv, depth, lt, &m.shadow, &TraceParams { lod, ..params });
-                    vis = sh.visibility;
-                    *fetches += sh.fetches;
-                }
+            if with_shadows
+                && n_dot_l > 0.0
+                && m.shadow.mode != ShadowMode::None
+                && let Some(surface) = &prep.surface
+            {
+                let sh = shadow_of(li, surface, tangent_ray(l, n, lane.tangent, v.uv_scale));
+                vis = sh.visibility;
+                *fetches += sh.fetches;
             }
             if li == 0 {
                 first_vis = vis;
@@ -843,19 +1056,23 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
         }
         (c, first_vis)
     };
-    let shadows = prep.technique.displaces() || prep.material.height.is_some() && prep.technique != Technique::Flat;
-    let (full, vis) = lit(hit_uv, hit_depth, shadows && weight > 0.0, &mut fetches);
+    let weight = lane.weight;
+    let with_shadows = shadows(prep) && weight > 0.0;
+    let (full, vis) = lit(lane.hit_uv, with_shadows, &mut fetches);
     let color = if weight >= 1.0 || prep.surface.is_none() {
         full
+    } else if !with_shadows && lane.hit_uv == v.uv {
+        // The normal-mapped fallback is the same lighting at the same point: a.lerp(a, w) is a.
+        full
     } else {
-        let (simple, _) = lit(v.uv, v.depth, false, &mut fetches);
+        let (simple, _) = lit(v.uv, false, &mut fetches);
         simple.lerp(full, weight)
     };
     // Pixel depth offset: move the depth to the traced point along the view ray.
     let mut z = f.z;
-    if m.pixel_depth_offset && ray_depth > 0.0 && weight > 0.0 && prep.technique.displaces() {
+    if m.pixel_depth_offset && lane.ray_depth > 0.0 && weight > 0.0 && prep.technique.displaces() {
         let l_world = (v.uv_scale.x * v.uv_scale.y).max(0.0).sqrt();
-        let down = ray_depth * prep.depth_scale * l_world; // world depth below the polygon
+        let down = lane.ray_depth * prep.depth_scale * l_world; // world depth below the polygon
         let cos = to_eye.dot(n).max(1e-3);
         let p = v.world - to_eye * (down / cos);
         let aspect_free = cam.projection(1.0) * cam.view(); // depth does not depend on aspect
@@ -864,7 +1081,7 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
             z = (c.z / c.w).max(f.z);
         }
     }
-    Some(Sample { color, z, uv: hit_uv, depth: hit_depth, shadow: vis, fetches: fetches as f32, lod })
+    Sample { color, z, uv: lane.hit_uv, depth: lane.hit_depth, shadow: vis, fetches: fetches as f32, lod: lane.lod }
 }
 
 #[cfg(test)]
