@@ -162,18 +162,32 @@ impl NormalMap {
 
 /// Bilinear interpolation of a row-major grid of vectors over texel centres, as a GPU filters.
 fn bilinear_vec3(texels: &[Vec3], width: u32, height: u32, uv: Vec2, edges: EdgeMode) -> Vec3 {
+    if width == 1 && height == 1 {
+        // A constant (a material without an albedo map, the last mip): its one texel.
+        return texels[0];
+    }
     let t = uv * Vec2::new(width as f32, height as f32) - 0.5;
     let t = if t.is_finite() { t } else { Vec2::ZERO };
-    let f = t.floor();
+    let f = Vec2::new(crate::heightfield::floor(t.x), crate::heightfield::floor(t.y));
     let (fx, fy) = (t.x - f.x, t.y - f.y);
     let (x0, y0) = (f.x as i64, f.y as i64);
+    if x0 >= 0 && y0 >= 0 && x0 < i64::from(width) - 1 && y0 < i64::from(height) - 1 {
+        // Inside: the four texels without edge handling.
+        let at = y0 as usize * width as usize + x0 as usize;
+        let below = at + width as usize;
+        let top = texels[at].lerp(texels[at + 1], fx);
+        let bottom = texels[below].lerp(texels[below + 1], fx);
+        return top.lerp(bottom, fy);
+    }
     let at = |x: i64, y: i64| {
         let xi = edges.resolve(x, width) as usize;
         let yi = edges.resolve(y, height) as usize;
         texels[yi * width as usize + xi]
     };
-    let top = at(x0, y0).lerp(at(x0 + 1, y0), fx);
-    let bottom = at(x0, y0 + 1).lerp(at(x0 + 1, y0 + 1), fx);
+    // `as` saturates far outside the i64 range; the neighbour saturates too rather than overflow.
+    let (x1, y1) = (x0.saturating_add(1), y0.saturating_add(1));
+    let top = at(x0, y0).lerp(at(x1, y0), fx);
+    let bottom = at(x0, y1).lerp(at(x1, y1), fx);
     top.lerp(bottom, fy)
 }
 

@@ -55,7 +55,11 @@ pub use simd::{SIMD_ENV, Simd8, SimdEnvError, cpu_features};
 /// A material prepared for shading: surfaces, mip chains, normal maps.
 struct Prepared {
     material: Material,
+    /// The height map prepared for tracing, where the frame traces it: a displacing technique,
+    /// or the displaced reference's shadows. `flat` and `normal` only need `lod_basis`.
     surface: Option<Arc<Surface>>,
+    /// The height map's size in texels and its coarsest mip level, for the level of detail.
+    lod_basis: Option<(Vec2, f32)>,
     normals: Option<Arc<NormalMap>>,
     albedo: Vec<Texture>,
     technique: Technique,
@@ -174,7 +178,11 @@ impl CpuRenderer {
             (w, h, ss),
             &mut color,
             opts.aovs.then_some(&mut aovs),
-            Shading { level: self.simd.level, lod_tint: opts.lod_tint },
+            Shading {
+                level: self.simd.level,
+                lod_tint: opts.lod_tint,
+                depth_matrix: scene.camera.projection(1.0) * scene.camera.view(),
+            },
             progress,
         )?;
         Ok(RenderOutput { width: w, height: h, color, aovs: opts.aovs.then_some(aovs), covered })
@@ -496,7 +504,12 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
             let technique = opts.mode.technique(m.technique);
             let params = m.trace.sanitized();
             let (depth_scale, edges) = (sanitized_depth_scale(m.depth_scale), m.edges);
-            let surface = m.height.as_ref().map(|f| {
+            let lod_basis = m.height.as_ref().map(|f| (f.size_f32(), coarsest_level(f.width(), f.height())));
+            // Without a displacing technique the surface is traced only by the displaced
+            // reference's shadows (its fragments lie below the polygon); elsewhere every
+            // fragment lies on the polygon, where nothing shadows it.
+            let traced = technique.displaces() || opts.mode == Mode::Displaced;
+            let surface = m.height.as_ref().filter(|_| traced).map(|f| {
                 let mut surface = Surface::new((**f).clone(), edges, depth_scale);
                 // The material's own cones or the field's, built once (not inside the first
                 // pixel's trace nor again for the next frame); either fits the field.
@@ -508,6 +521,8 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
                 Arc::new(surface)
             });
             let normals = match (&m.normal_map, &m.height) {
+                // `flat` shades with the geometric normal.
+                _ if technique == Technique::Flat => None,
                 (Some(n), _) => Some(n.clone()),
                 (None, Some(f)) if f.width() >= 2 && f.height() >= 2 => {
                     // The normal map that matches the geometry: the full depth spans
@@ -527,9 +542,20 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
                 let next = last.downsample();
                 albedo.push(next);
             }
-            Prepared { material: m.clone(), surface, normals, albedo, technique, params, depth_scale, edges }
+            Prepared { material: m.clone(), surface, lod_basis, normals, albedo, technique, params, depth_scale, edges }
         })
         .collect()
+}
+
+/// The coarsest level of a `w x h` mip chain (sides halve, never below 1, down to 1 x 1), as
+/// [`pomkit_core::MipChain::max_level`] counts it.
+fn coarsest_level(mut w: u32, mut h: u32) -> f32 {
+    let mut k = 0u32;
+    while w > 1 || h > 1 {
+        (w, h) = ((w / 2).max(1), (h / 2).max(1));
+        k += 1;
+    }
+    k as f32
 }
 
 /// Pixel rows per band: each band's samples are shaded (tile by tile, in parallel) and
@@ -728,14 +754,15 @@ fn draw(
     let prep = &prepared[obj.material];
     let mut packet: Vec<Fragment> = Vec::with_capacity(LANES);
     let mut slots = [0usize; LANES];
-    let flush = |packet: &mut Vec<Fragment>, slots: &[usize; LANES], buf: &mut [Option<Sample>]| {
+    let mut shadows = Vec::with_capacity(scene.lights.len());
+    let mut flush = |packet: &mut Vec<Fragment>, slots: &[usize; LANES], buf: &mut [Option<Sample>]| {
         let mut out = [None; LANES];
         let level = shading.level;
-        dispatch!(level, simd => shade_packet(simd, scene, prep, packet, &mut out));
+        dispatch!(level, simd => shade_packet(simd, scene, prep, &shading, packet, &mut shadows, &mut out));
         for (k, s) in out.into_iter().enumerate().take(packet.len()) {
             // A silhouette pixel whose ray leaves the relief is discarded: it writes nothing.
             let Some(mut s) = s else { continue };
-            if shading.lod_tint && prep.surface.is_some() {
+            if shading.lod_tint && prep.lod_basis.is_some() {
                 let w = lod_weight(s.lod, prep.material.lod_threshold);
                 let tint = Vec3::new(1.0, 0.25, 0.2).lerp(Vec3::new(0.25, 1.0, 0.3), w);
                 s.color = s.color * 0.5 + tint * 0.5 * s.color.length().max(0.05);
@@ -771,6 +798,9 @@ fn draw(
 struct Shading {
     level: Level,
     lod_tint: bool,
+    /// The camera's view-projection at aspect 1, for the pixel depth offset (NDC depth does not
+    /// depend on the aspect).
+    depth_matrix: Mat4,
 }
 
 /// A fragment's state between the stages of [`shade`]: its tangent frame, view ray and level of
@@ -808,15 +838,15 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment) -> Lane {
     let tangent = Vec4::new(t.x, t.y, t.z, sign);
     let to_eye = (scene.camera.eye - v.world).try_normalize().unwrap_or(n);
     // Mip level of the height map from the quad's UV gradients, fixed before any loop.
-    let (lod, weight) = match &prep.surface {
-        Some(s) => {
-            let f0 = s.field();
-            let lod = mip_level_from_gradients(f.duv_dx, f.duv_dy, f0.size_f32(), s.mips().max_level());
+    let (lod, weight) = match prep.lod_basis {
+        Some((size, coarsest)) => {
+            let lod = mip_level_from_gradients(f.duv_dx, f.duv_dy, size, coarsest);
             (lod, lod_weight(lod, m.lod_threshold))
         }
         None => (0.0, 0.0),
     };
-    let dir = tangent_ray(-to_eye, n, tangent, v.uv_scale);
+    // The view ray in tangent space, for the techniques that trace it.
+    let dir = if prep.technique.displaces() { tangent_ray(-to_eye, n, tangent, v.uv_scale) } else { Vec3::ZERO };
     let mut lane = Lane {
         n,
         t,
@@ -872,7 +902,7 @@ fn take_hit(prep: &Prepared, surface: &Surface, lane: &mut Lane, hit: &Hit) {
 
 /// The fragment stage for one fragment; `None` discards it (a silhouette ray that left the
 /// relief).
-fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
+fn shade(scene: &Scene, prep: &Prepared, shading: &Shading, f: &Fragment) -> Option<Sample> {
     let mut lane = begin(scene, prep, f);
     if traces(prep, &lane)
         && let Some(surface) = &prep.surface
@@ -892,15 +922,11 @@ fn shade(scene: &Scene, prep: &Prepared, f: &Fragment) -> Option<Sample> {
         };
         take_hit(prep, surface, &mut lane, &hit);
     }
-    Some(finish(scene, prep, f, &lane, |_, surface, light| {
-        shadow(
-            surface,
-            lane.hit_uv,
-            lane.hit_depth,
-            light,
-            &prep.material.shadow,
-            &TraceParams { lod: lane.lod, ..prep.params },
-        )
+    Some(finish(scene, prep, shading, f, &lane, |_, surface, l| {
+        // tangent_ray maps a direction of travel; toward the light it is the same map.
+        let light = tangent_ray(l, lane.n, lane.tangent, f.v.uv_scale);
+        let p = TraceParams { lod: lane.lod, ..prep.params };
+        shadow(surface, lane.hit_uv, lane.hit_depth, light, &prep.material.shadow, &p)
     }))
 }
 
@@ -913,13 +939,15 @@ fn shade_packet<S: Simd>(
     simd: S,
     scene: &Scene,
     prep: &Prepared,
+    shading: &Shading,
     frags: &[Fragment],
+    shadows: &mut Vec<[Option<Shadow>; LANES]>,
     out: &mut [Option<Sample>; LANES],
 ) {
     let Some(surface) = prep.surface.as_deref().filter(|_| !silhouettes(prep)) else {
         // Curved rays (silhouettes) and materials without a height map: one at a time.
         for (o, f) in out.iter_mut().zip(frags) {
-            *o = shade(scene, prep, f);
+            *o = shade(scene, prep, shading, f);
         }
         return;
     };
@@ -944,7 +972,7 @@ fn shade_packet<S: Simd>(
     }
     // Every light's shadow rays, a packet per light; the hard and soft ones marched together.
     let m = &prep.material;
-    let mut shadows: Vec<[Option<Shadow>; LANES]> = Vec::with_capacity(scene.lights.len());
+    shadows.clear();
     for light in &scene.lights {
         let mut done = [None; LANES];
         let mut marches = [None; LANES];
@@ -969,7 +997,7 @@ fn shade_packet<S: Simd>(
     }
     for (i, (lane, f)) in lanes.iter().zip(frags).enumerate() {
         if let Some(lane) = lane {
-            out[i] = Some(finish(scene, prep, f, lane, |li, _, _| {
+            out[i] = Some(finish(scene, prep, shading, f, lane, |li, _, _| {
                 shadows[li][i].unwrap_or(Shadow { visibility: 1.0, fetches: 0 })
             }));
         }
@@ -1006,18 +1034,18 @@ fn shadows(prep: &Prepared) -> bool {
 }
 
 /// The fragment stage after the trace: textures at the hit, lighting with the shadows
-/// `shadow_of(light index, surface, tangent-space light direction)` gives, the LOD fade and the
+/// `shadow_of(light index, surface, world direction toward the light)` gives, the LOD fade and the
 /// pixel depth offset.
 fn finish(
     scene: &Scene,
     prep: &Prepared,
+    shading: &Shading,
     f: &Fragment,
     lane: &Lane,
     mut shadow_of: impl FnMut(usize, &Surface, Vec3) -> Shadow,
 ) -> Sample {
     let m = &prep.material;
     let v = &f.v;
-    let cam = &scene.camera;
     let (n, t, b, to_eye) = (lane.n, lane.t, lane.b, lane.to_eye);
     let edges = prep.edges;
     let mut fetches = lane.fetches;
@@ -1042,7 +1070,7 @@ fn finish(
                 && m.shadow.mode != ShadowMode::None
                 && let Some(surface) = &prep.surface
             {
-                let sh = shadow_of(li, surface, tangent_ray(l, n, lane.tangent, v.uv_scale));
+                let sh = shadow_of(li, surface, l);
                 vis = sh.visibility;
                 *fetches += sh.fetches;
             }
@@ -1059,7 +1087,7 @@ fn finish(
     let weight = lane.weight;
     let with_shadows = shadows(prep) && weight > 0.0;
     let (full, vis) = lit(lane.hit_uv, with_shadows, &mut fetches);
-    let color = if weight >= 1.0 || prep.surface.is_none() {
+    let color = if weight >= 1.0 || prep.lod_basis.is_none() {
         full
     } else if !with_shadows && lane.hit_uv == v.uv {
         // The normal-mapped fallback is the same lighting at the same point: a.lerp(a, w) is a.
@@ -1075,8 +1103,7 @@ fn finish(
         let down = lane.ray_depth * prep.depth_scale * l_world; // world depth below the polygon
         let cos = to_eye.dot(n).max(1e-3);
         let p = v.world - to_eye * (down / cos);
-        let aspect_free = cam.projection(1.0) * cam.view(); // depth does not depend on aspect
-        let c = aspect_free * p.extend(1.0);
+        let c = shading.depth_matrix * p.extend(1.0);
         if c.w > 0.0 {
             z = (c.z / c.w).max(f.z);
         }
@@ -1096,6 +1123,14 @@ mod tests {
             bytes += a.uv.len() * 8 + (a.depth.len() + a.shadow.len() + a.fetches.len() + a.lod.len()) * 4;
         }
         bytes as u64
+    }
+
+    #[test]
+    fn the_coarsest_level_is_the_mip_chains() {
+        for (w, h) in [(1, 1), (2, 1), (512, 512), (640, 48), (3, 7), (1, 1000)] {
+            let chain = pomkit_core::MipChain::new(pomkit_core::HeightField::constant(w, h, 0.5));
+            assert_eq!(coarsest_level(w, h), chain.max_level(), "{w}x{h}");
+        }
     }
 
     #[test]
