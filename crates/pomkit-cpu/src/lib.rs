@@ -35,7 +35,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use fearless_simd::{Level, Simd, dispatch};
 use glam::{Mat4, Vec2, Vec3, Vec4};
 use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals};
-use pomkit_core::mesh::{DisplacedBlock, DisplacedBlocks, DisplacementView, Mesh, tangent_ray};
+use pomkit_core::heightfield::floor;
+use pomkit_core::mesh::{DisplacedBlock, DisplacedBlocks, DisplacementView, Mesh, TangentMap};
 use pomkit_core::scene::{Light, Material, NormalMap, Scene, Texture};
 use pomkit_core::shadow::{Shadow, ShadowMode, ShadowStart, lod_weight, shadow, shadow_start};
 use pomkit_core::silhouette::{trace_curved, vertex_curvature, view_curvature};
@@ -77,7 +78,7 @@ fn albedo_level(chain: &[Texture], duv_dx: Vec2, duv_dy: Vec2) -> f32 {
 }
 
 fn sample_albedo(chain: &[Texture], uv: Vec2, lod: f32, edges: EdgeMode) -> Vec3 {
-    let k = lod.floor().max(0.0) as usize;
+    let k = floor(lod).max(0.0) as usize;
     let f = lod - k as f32;
     let a = chain[k.min(chain.len() - 1)].sample(uv, edges);
     if f <= 0.0 || k + 1 >= chain.len() {
@@ -815,7 +816,8 @@ struct Lane {
     /// Mip level of the height map, and the weight of the full technique in the LOD fade.
     lod: f32,
     weight: f32,
-    /// The view ray in tangent space.
+    /// World directions to tangent space (where a ray is traced), and the view ray there.
+    map: Option<TangentMap>,
     dir: Vec3,
     hit_uv: Vec2,
     hit_depth: f32,
@@ -845,9 +847,14 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment) -> Lane {
         }
         None => (0.0, 0.0),
     };
-    // The view ray in tangent space, for the techniques that trace it.
-    let dir = if prep.technique.displaces() { tangent_ray(-to_eye, n, tangent, v.uv_scale) } else { Vec3::ZERO };
+    // World directions to tangent space, for the view ray and the shadow rays.
+    let map = if prep.technique.displaces() || shadows(prep) { TangentMap::new(n, tangent, v.uv_scale) } else { None };
+    let dir = match map {
+        Some(m) if prep.technique.displaces() => m.apply(-to_eye),
+        _ => Vec3::ZERO,
+    };
     let mut lane = Lane {
+        map,
         n,
         t,
         b,
@@ -923,8 +930,8 @@ fn shade(scene: &Scene, prep: &Prepared, shading: &Shading, f: &Fragment) -> Opt
         take_hit(prep, surface, &mut lane, &hit);
     }
     Some(finish(scene, prep, shading, f, &lane, |_, surface, l| {
-        // tangent_ray maps a direction of travel; toward the light it is the same map.
-        let light = tangent_ray(l, lane.n, lane.tangent, f.v.uv_scale);
+        // The map takes a direction of travel; toward the light it is the same map.
+        let light = lane.map.map_or(Vec3::ZERO, |m| m.apply(l));
         let p = TraceParams { lod: lane.lod, ..prep.params };
         shadow(surface, lane.hit_uv, lane.hit_depth, light, &prep.material.shadow, &p)
     }))
@@ -1023,9 +1030,9 @@ fn light_at(light: &Light, world: Vec3) -> (Vec3, Vec3) {
 fn shadow_ray(prep: &Prepared, lane: &Lane, f: &Fragment, light: &Light) -> Option<Vec3> {
     let (l, _) = light_at(light, f.v.world);
     let traced = shadows(prep) && lane.weight > 0.0 && lane.n.dot(l) > 0.0;
-    // tangent_ray maps a direction of travel; toward the light it is the same map.
+    // The map takes a direction of travel; toward the light it is the same map.
     (traced && prep.material.shadow.mode != ShadowMode::None && prep.surface.is_some())
-        .then(|| tangent_ray(l, lane.n, lane.tangent, f.v.uv_scale))
+        .then(|| lane.map.map_or(Vec3::ZERO, |m| m.apply(l)))
 }
 
 /// Whether the material's full technique casts self-shadows.
@@ -1051,6 +1058,12 @@ fn finish(
     let mut fetches = lane.fetches;
     let albedo_lod = albedo_level(&prep.albedo, f.duv_dx, f.duv_dy);
     let mut lit = |uv: Vec2, with_shadows: bool, fetches: &mut u32| -> (Vec3, f32) {
+        // Where the textures repeat, their coordinates in the tile (hit UVs are in the ray's own
+        // tile frame): the filter then reads inner texels without wrapping them one by one.
+        let uv = match edges {
+            EdgeMode::Wrap => Vec2::new(uv.x - floor(uv.x), uv.y - floor(uv.y)),
+            EdgeMode::Clamp => uv,
+        };
         let base = sample_albedo(&prep.albedo, uv, albedo_lod, edges) * m.base_color;
         let shading_n = match (&prep.normals, prep.technique) {
             (Some(nm), tq) if tq != Technique::Flat => {

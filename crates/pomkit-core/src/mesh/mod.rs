@@ -175,16 +175,48 @@ pub fn tangent_ray(view_dir_world: Vec3, normal: Vec3, tangent: Vec4, uv_scale: 
     if !(view_dir_world.is_finite() && normal.is_finite() && tangent.is_finite()) {
         return Vec3::ZERO;
     }
-    let Some(n) = normal.try_normalize() else {
-        return Vec3::ZERO;
-    };
-    let t = orthonormal_tangent(tangent.truncate(), n);
-    let b = handedness(tangent.w) * n.cross(t);
-    let s = sane_uv_scale(uv_scale);
-    // L / sx = sqrt(sy / sx) and L / sy = sqrt(sx / sy), without forming sx * sy.
-    let v = view_dir_world;
-    let r = Vec3::new(v.dot(t) * (s.y / s.x).sqrt(), -v.dot(b) * (s.x / s.y).sqrt(), v.dot(n));
-    if r.is_finite() { r } else { Vec3::ZERO }
+    TangentMap::new(normal, tangent, uv_scale).map_or(Vec3::ZERO, |m| m.apply(view_dir_world))
+}
+
+/// [`tangent_ray`]'s map for one frame, made once and applied to any number of directions (a
+/// fragment's view ray and its lights): `TangentMap::new(n, t, s)?.apply(v)` is
+/// `tangent_ray(v, n, t, s)` for finite `v`, bit for bit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TangentMap {
+    t: Vec3,
+    b: Vec3,
+    n: Vec3,
+    /// `L / sx` and `L / sy`.
+    scale: Vec2,
+}
+
+impl TangentMap {
+    /// The map of the frame (`normal`, `tangent`, `uv_scale`); `None` for a non-finite or zero
+    /// normal or a non-finite tangent (where [`tangent_ray`] gives zero).
+    #[must_use]
+    pub fn new(normal: Vec3, tangent: Vec4, uv_scale: Vec2) -> Option<Self> {
+        if !(normal.is_finite() && tangent.is_finite()) {
+            return None;
+        }
+        let n = normal.try_normalize()?;
+        let t = orthonormal_tangent(tangent.truncate(), n);
+        let b = handedness(tangent.w) * n.cross(t);
+        let s = sane_uv_scale(uv_scale);
+        // L / sx = sqrt(sy / sx) and L / sy = sqrt(sx / sy), without forming sx * sy.
+        Some(Self { t, b, n, scale: Vec2::new((s.y / s.x).sqrt(), (s.x / s.y).sqrt()) })
+    }
+
+    /// The tangent-space direction of the world direction `v`; zero for a non-finite `v` or
+    /// result.
+    #[inline]
+    #[must_use]
+    pub fn apply(&self, v: Vec3) -> Vec3 {
+        if !v.is_finite() {
+            return Vec3::ZERO;
+        }
+        let r = Vec3::new(v.dot(self.t) * self.scale.x, -v.dot(self.b) * self.scale.y, v.dot(self.n));
+        if r.is_finite() { r } else { Vec3::ZERO }
+    }
 }
 
 impl Mesh {

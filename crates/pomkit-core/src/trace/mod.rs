@@ -562,7 +562,7 @@ pub(crate) fn march<P: Profile>(
             let mut uv = uv0;
             let mut sum = 0.0;
             for _ in 0..k {
-                let value = surface.parallax.sample(uv, p.lod, surface.edges);
+                let value = surface.parallax_mips().sample(uv, p.lod, surface.edges);
                 sum += value;
                 uv += step * value;
             }

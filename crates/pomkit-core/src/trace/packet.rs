@@ -267,7 +267,7 @@ fn march_packet<S: Simd>(
         }
         Technique::Iterative => {
             let k = p.iterations;
-            let par = Levels::new(&surface.parallax, lods, surface.edges);
+            let par = Levels::new(surface.parallax_mips(), lods, surface.edges);
             let step = dirs.map(|d| Vec2::new(d.x, d.y) * (ds / k as f32));
             let (stu, stv) = (vec(simd, step.map(|v| v.x)), vec(simd, step.map(|v| v.y)));
             let (mut u, mut v) = (rays.u0, rays.v0);

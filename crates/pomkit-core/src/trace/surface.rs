@@ -4,12 +4,14 @@
 use super::*;
 
 /// A height field prepared for tracing: its mip chain, its maximum-height pyramid and the
-/// parallax map `n_z * d` used by [`Technique::Iterative`].
+/// parallax map `n_z * d` used by [`Technique::Iterative`] (these two made on first use).
 #[derive(Clone, Debug)]
 pub struct Surface {
     pub(super) mips: MipChain,
-    pub(super) pyramid: MaxHeightPyramid,
-    pub(super) parallax: MipChain,
+    /// The maximum-height pyramid (`exact`, `cone`, exact shadows), built on first use.
+    pyramid: std::sync::OnceLock<MaxHeightPyramid>,
+    /// The parallax map's mip chain (`iterative`), built on first use.
+    parallax: std::sync::OnceLock<MipChain>,
     pub(super) edges: EdgeMode,
     pub(super) depth_scale: f32,
     /// The cone map of `cone`, built on first use or set by [`Surface::set_cones`].
@@ -20,34 +22,36 @@ impl Surface {
     /// Prepares `field` for tracing with the given edge mode and depth scale (the parallax map
     /// depends on the depth scale through its normals: the full depth spans
     /// `depth_scale * width` texels). Every trace and shadow on the surface works at this depth
-    /// scale and samples with these edges. `depth_scale` is [`sanitized_depth_scale`]d, so any
+    /// scale and samples with these edges. The mip chain is built here; the maximum-height
+    /// pyramid and the parallax map on first use (by `exact`, `cone` and exact shadows, and by
+    /// `iterative`), so a frame pays only for what its technique reads. `depth_scale` is [`sanitized_depth_scale`]d, so any
     /// value gives a usable surface; check it with [`check_depth_scale`] to report bad input.
     #[must_use]
     pub fn new(field: HeightField, edges: EdgeMode, depth_scale: f32) -> Self {
-        let pyramid = MaxHeightPyramid::new(&field, edges);
-        let scale = sanitized_depth_scale(depth_scale);
-        let parallax = if field.width() >= 2 && field.height() >= 2 {
-            let opts = NormalBakeOptions {
-                scale: scale * field.width() as f32,
-                filter: NormalFilter::Central,
-                edges,
-                y_down: false,
-            };
-            let normals = bake_normals(&field, &opts).unwrap_or_else(|_| vec![Vec3::Z; field.depths().len()]);
-            let values: Vec<f32> =
-                normals.iter().zip(field.depths()).map(|(n, &d)| (n.z * d).clamp(0.0, 1.0)).collect();
-            HeightField::from_depths(field.width(), field.height(), values).unwrap_or_else(|_| field.clone())
-        } else {
-            field.clone()
-        };
         Self {
             mips: MipChain::new(field),
-            pyramid,
-            parallax: MipChain::new(parallax),
+            pyramid: std::sync::OnceLock::new(),
+            parallax: std::sync::OnceLock::new(),
             edges,
-            depth_scale: scale,
+            depth_scale: sanitized_depth_scale(depth_scale),
             cones: std::sync::OnceLock::new(),
         }
+    }
+
+    /// The parallax map `clamp(n_z * d, 0, 1)` of `field` at `scale` (Lengyel 7.51).
+    fn build_parallax(field: &HeightField, edges: EdgeMode, scale: f32) -> MipChain {
+        if field.width() < 2 || field.height() < 2 {
+            return MipChain::new(field.clone());
+        }
+        let opts = NormalBakeOptions {
+            scale: scale * field.width() as f32,
+            filter: NormalFilter::Central,
+            edges,
+            y_down: false,
+        };
+        let normals = bake_normals(field, &opts).unwrap_or_else(|_| vec![Vec3::Z; field.depths().len()]);
+        let values: Vec<f32> = normals.iter().zip(field.depths()).map(|(n, &d)| (n.z * d).clamp(0.0, 1.0)).collect();
+        MipChain::new(HeightField::from_depths(field.width(), field.height(), values).unwrap_or_else(|_| field.clone()))
     }
 
     /// The cone map `cone` steps on: the one given to [`Surface::set_cones`], or else the
@@ -87,13 +91,13 @@ impl Surface {
     /// technique reads; a GPU host uploads it beside the depths).
     #[must_use]
     pub fn parallax_mips(&self) -> &MipChain {
-        &self.parallax
+        self.parallax.get_or_init(|| Self::build_parallax(self.field(), self.edges, self.depth_scale))
     }
 
     /// The maximum-height pyramid.
     #[must_use]
     pub fn pyramid(&self) -> &MaxHeightPyramid {
-        &self.pyramid
+        self.pyramid.get_or_init(|| MaxHeightPyramid::new(self.field(), self.edges))
     }
 
     /// The edge mode the surface was prepared for.
