@@ -27,6 +27,7 @@
 //! ```
 
 pub mod raster;
+mod shade8;
 pub mod simd;
 
 use std::sync::Arc;
@@ -181,6 +182,7 @@ impl CpuRenderer {
             opts.aovs.then_some(&mut aovs),
             Shading {
                 level: self.simd.level,
+                packets: self.simd.packets,
                 lod_tint: opts.lod_tint,
                 depth_matrix: scene.camera.projection(1.0) * scene.camera.view(),
             },
@@ -759,7 +761,13 @@ fn draw(
     let mut flush = |packet: &mut Vec<Fragment>, slots: &[usize; LANES], buf: &mut [Option<Sample>]| {
         let mut out = [None; LANES];
         let level = shading.level;
-        dispatch!(level, simd => shade_packet(simd, scene, prep, &shading, packet, &mut shadows, &mut out));
+        if shading.packets {
+            dispatch!(level, simd => shade_packet(simd, scene, prep, &shading, packet, &mut shadows, &mut out));
+        } else {
+            for (o, f) in out.iter_mut().zip(packet.iter()) {
+                *o = shade(scene, prep, &shading, f);
+            }
+        }
         for (k, s) in out.into_iter().enumerate().take(packet.len()) {
             // A silhouette pixel whose ray leaves the relief is discarded: it writes nothing.
             let Some(mut s) = s else { continue };
@@ -798,6 +806,8 @@ fn draw(
 #[derive(Clone, Copy, Debug)]
 struct Shading {
     level: Level,
+    /// Packets of eight fragments, or one fragment at a time ([`Simd8::unpacked`]).
+    packets: bool,
     lod_tint: bool,
     /// The camera's view-projection at aspect 1, for the pixel depth offset (NDC depth does not
     /// depend on the aspect).
@@ -848,7 +858,8 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment) -> Lane {
         None => (0.0, 0.0),
     };
     // World directions to tangent space, for the view ray and the shadow rays.
-    let map = if prep.technique.displaces() || shadows(prep) { TangentMap::new(n, tangent, v.uv_scale) } else { None };
+    let map =
+        if prep.technique.displaces() || shadows_cast(prep) { TangentMap::new(n, tangent, v.uv_scale) } else { None };
     let dir = match map {
         Some(m) if prep.technique.displaces() => m.apply(-to_eye),
         _ => Vec3::ZERO,
@@ -951,13 +962,14 @@ fn shade_packet<S: Simd>(
     shadows: &mut Vec<[Option<Shadow>; LANES]>,
     out: &mut [Option<Sample>; LANES],
 ) {
-    let Some(surface) = prep.surface.as_deref().filter(|_| !silhouettes(prep)) else {
-        // Curved rays (silhouettes) and materials without a height map: one at a time.
+    if silhouettes(prep) {
+        // Curved rays: one at a time.
         for (o, f) in out.iter_mut().zip(frags) {
             *o = shade(scene, prep, shading, f);
         }
         return;
-    };
+    }
+    let surface = prep.surface.as_deref();
     let mut lanes: [Option<Lane>; LANES] = [None; LANES];
     let mut rays = [None; LANES];
     let mut lods = [0.0; LANES];
@@ -969,7 +981,9 @@ fn shade_packet<S: Simd>(
         lods[i] = lane.lod;
         lanes[i] = Some(lane);
     }
-    if rays.iter().any(Option::is_some) {
+    if let Some(surface) = surface
+        && rays.iter().any(Option::is_some)
+    {
         let hits = packet::trace_packet(simd, surface, &rays, prep.technique, &prep.params, lods);
         for (lane, hit) in lanes.iter_mut().zip(&hits) {
             if let (Some(lane), Some(hit)) = (lane, hit) {
@@ -980,7 +994,8 @@ fn shade_packet<S: Simd>(
     // Every light's shadow rays, a packet per light; the hard and soft ones marched together.
     let m = &prep.material;
     shadows.clear();
-    for light in &scene.lights {
+    for light in scene.lights.iter().filter(|_| surface.is_some()) {
+        let Some(surface) = surface else { break };
         let mut done = [None; LANES];
         let mut marches = [None; LANES];
         for (i, (lane, f)) in lanes.iter().zip(frags).enumerate() {
@@ -1002,12 +1017,75 @@ fn shade_packet<S: Simd>(
         }
         shadows.push(done);
     }
-    for (i, (lane, f)) in lanes.iter().zip(frags).enumerate() {
-        if let Some(lane) = lane {
-            out[i] = Some(finish(scene, prep, shading, f, lane, |li, _, _| {
-                shadows[li][i].unwrap_or(Shadow { visibility: 1.0, fetches: 0 })
-            }));
-        }
+    finish_packet(simd, scene, prep, shading, frags, &lanes, shadows, out);
+}
+
+/// Where the textures repeat, a UV's point in the tile (hit UVs are in the ray's own tile
+/// frame): the filters then read inner texels without wrapping them one by one.
+fn texture_uv(uv: Vec2, edges: EdgeMode) -> Vec2 {
+    match edges {
+        EdgeMode::Wrap => Vec2::new(uv.x - floor(uv.x), uv.y - floor(uv.y)),
+        EdgeMode::Clamp => uv,
+    }
+}
+
+/// [`finish`] for a packet of fragments (`lanes[i]` set for every `frags[i]`), with the
+/// shadows already traced (`shadows[light][lane]`): the texture filtering and lighting run on
+/// all lanes at once ([`shade8`]), the pixel depth offset lane by lane.
+#[expect(clippy::too_many_arguments, reason = "a packet's fragments, their state and the frame")]
+#[inline(always)]
+fn finish_packet<S: Simd>(
+    simd: S,
+    scene: &Scene,
+    prep: &Prepared,
+    shading: &Shading,
+    frags: &[Fragment],
+    lanes: &[Option<Lane>; LANES],
+    shadows: &[[Option<Shadow>; LANES]],
+    out: &mut [Option<Sample>; LANES],
+) {
+    let Some(first) = lanes[0] else { return };
+    let lane = |i: usize| lanes[i].unwrap_or(first);
+    let frag = |i: usize| frags.get(i).unwrap_or(&frags[0]);
+    let pick = |g: &dyn Fn(&Lane) -> Vec3| -> [Vec3; LANES] { std::array::from_fn(|i| g(&lane(i))) };
+    let edges = prep.edges;
+    let inputs = shade8::LitInputs {
+        n: shade8::V3::from_lanes(simd, &pick(&|l| l.n)),
+        t: shade8::V3::from_lanes(simd, &pick(&|l| l.t)),
+        b: shade8::V3::from_lanes(simd, &pick(&|l| l.b)),
+        to_eye: shade8::V3::from_lanes(simd, &pick(&|l| l.to_eye)),
+        world: std::array::from_fn(|i| frag(i).v.world),
+        albedo_lods: std::array::from_fn(|i| albedo_level(&prep.albedo, frag(i).duv_dx, frag(i).duv_dy)),
+        shadows,
+    };
+    let weight: [f32; LANES] = std::array::from_fn(|i| lane(i).weight);
+    let with_shadows: [bool; LANES] = std::array::from_fn(|i| shadows_cast(prep) && weight[i] > 0.0);
+    let hit_uv: [Vec2; LANES] = std::array::from_fn(|i| texture_uv(lane(i).hit_uv, edges));
+    let (full, vis, shadow_fetches) = shade8::lit(simd, scene, prep, &inputs, &hit_uv, with_shadows);
+    // The LOD fade's normal-mapped fallback, where it differs from the full result.
+    let simple: [bool; LANES] = std::array::from_fn(|i| {
+        !(weight[i] >= 1.0 || prep.lod_basis.is_none()) && !(!with_shadows[i] && lane(i).hit_uv == frag(i).v.uv)
+    });
+    let color = if simple.contains(&true) {
+        let uv: [Vec2; LANES] = std::array::from_fn(|i| texture_uv(frag(i).v.uv, edges));
+        let (plain, _, _) = shade8::lit(simd, scene, prep, &inputs, &uv, [false; LANES]);
+        let faded = plain.lerp(full, shade8::vec8(simd, weight));
+        shade8::V3::select(shade8::mask8(simd, simple), faded, full)
+    } else {
+        full
+    };
+    let color = color.lanes();
+    for (i, f) in frags.iter().enumerate() {
+        let l = lane(i);
+        out[i] = Some(Sample {
+            color: color[i],
+            z: depth_offset(prep, shading, f, &l),
+            uv: l.hit_uv,
+            depth: l.hit_depth,
+            shadow: vis[i],
+            fetches: (l.fetches + shadow_fetches[i]) as f32,
+            lod: l.lod,
+        });
     }
 }
 
@@ -1029,14 +1107,32 @@ fn light_at(light: &Light, world: Vec3) -> (Vec3, Vec3) {
 /// tangent-space direction.
 fn shadow_ray(prep: &Prepared, lane: &Lane, f: &Fragment, light: &Light) -> Option<Vec3> {
     let (l, _) = light_at(light, f.v.world);
-    let traced = shadows(prep) && lane.weight > 0.0 && lane.n.dot(l) > 0.0;
+    let traced = shadows_cast(prep) && lane.weight > 0.0 && lane.n.dot(l) > 0.0;
     // The map takes a direction of travel; toward the light it is the same map.
     (traced && prep.material.shadow.mode != ShadowMode::None && prep.surface.is_some())
         .then(|| lane.map.map_or(Vec3::ZERO, |m| m.apply(l)))
 }
 
+/// The fragment's depth: the polygon's, or with a pixel depth offset the traced point's along
+/// the view ray.
+fn depth_offset(prep: &Prepared, shading: &Shading, f: &Fragment, lane: &Lane) -> f32 {
+    let v = &f.v;
+    let mut z = f.z;
+    if prep.material.pixel_depth_offset && lane.ray_depth > 0.0 && lane.weight > 0.0 && prep.technique.displaces() {
+        let l_world = (v.uv_scale.x * v.uv_scale.y).max(0.0).sqrt();
+        let down = lane.ray_depth * prep.depth_scale * l_world; // world depth below the polygon
+        let cos = lane.to_eye.dot(lane.n).max(1e-3);
+        let p = v.world - lane.to_eye * (down / cos);
+        let c = shading.depth_matrix * p.extend(1.0);
+        if c.w > 0.0 {
+            z = (c.z / c.w).max(f.z);
+        }
+    }
+    z
+}
+
 /// Whether the material's full technique casts self-shadows.
-fn shadows(prep: &Prepared) -> bool {
+fn shadows_cast(prep: &Prepared) -> bool {
     prep.technique.displaces() || prep.material.height.is_some() && prep.technique != Technique::Flat
 }
 
@@ -1060,10 +1156,7 @@ fn finish(
     let mut lit = |uv: Vec2, with_shadows: bool, fetches: &mut u32| -> (Vec3, f32) {
         // Where the textures repeat, their coordinates in the tile (hit UVs are in the ray's own
         // tile frame): the filter then reads inner texels without wrapping them one by one.
-        let uv = match edges {
-            EdgeMode::Wrap => Vec2::new(uv.x - floor(uv.x), uv.y - floor(uv.y)),
-            EdgeMode::Clamp => uv,
-        };
+        let uv = texture_uv(uv, edges);
         let base = sample_albedo(&prep.albedo, uv, albedo_lod, edges) * m.base_color;
         let shading_n = match (&prep.normals, prep.technique) {
             (Some(nm), tq) if tq != Technique::Flat => {
@@ -1098,7 +1191,7 @@ fn finish(
         (c, first_vis)
     };
     let weight = lane.weight;
-    let with_shadows = shadows(prep) && weight > 0.0;
+    let with_shadows = shadows_cast(prep) && weight > 0.0;
     let (full, vis) = lit(lane.hit_uv, with_shadows, &mut fetches);
     let color = if weight >= 1.0 || prep.lod_basis.is_none() {
         full
@@ -1109,18 +1202,7 @@ fn finish(
         let (simple, _) = lit(v.uv, false, &mut fetches);
         simple.lerp(full, weight)
     };
-    // Pixel depth offset: move the depth to the traced point along the view ray.
-    let mut z = f.z;
-    if m.pixel_depth_offset && lane.ray_depth > 0.0 && weight > 0.0 && prep.technique.displaces() {
-        let l_world = (v.uv_scale.x * v.uv_scale.y).max(0.0).sqrt();
-        let down = lane.ray_depth * prep.depth_scale * l_world; // world depth below the polygon
-        let cos = to_eye.dot(n).max(1e-3);
-        let p = v.world - to_eye * (down / cos);
-        let c = shading.depth_matrix * p.extend(1.0);
-        if c.w > 0.0 {
-            z = (c.z / c.w).max(f.z);
-        }
-    }
+    let z = depth_offset(prep, shading, f, lane);
     Sample { color, z, uv: lane.hit_uv, depth: lane.hit_depth, shadow: vis, fetches: fetches as f32, lod: lane.lod }
 }
 

@@ -17,6 +17,8 @@ pub const SIMD_ENV: &str = "POMKIT_SIMD";
 #[derive(Clone, Copy, Debug)]
 pub struct Simd8 {
     pub(crate) level: Level,
+    /// Packets of eight fragments (else one fragment at a time, the scalar reference).
+    pub(crate) packets: bool,
 }
 
 /// `POMKIT_SIMD` holds a value the renderer does not know.
@@ -30,13 +32,13 @@ impl Simd8 {
     /// The best level this CPU has.
     #[must_use]
     pub fn detect() -> Self {
-        Self { level: Level::new() }
+        Self { level: Level::new(), packets: true }
     }
 
     /// The scalar fallback: the same packets on arrays of eight floats, no target features.
     #[must_use]
     pub fn scalar() -> Self {
-        Self { level: Level::fallback() }
+        Self { level: Level::fallback(), packets: true }
     }
 
     /// The level `POMKIT_SIMD` asks for: `auto` or unset gives [`Simd8::detect`], `scalar`
@@ -55,9 +57,20 @@ impl Simd8 {
         }
     }
 
-    /// The level's name: `avx2`, `sse4.2`, `neon` or `scalar`.
+    /// No packets: every fragment shaded on its own by the scalar code, the reference the
+    /// packets are tested against (and the slowest way).
+    #[must_use]
+    pub fn unpacked() -> Self {
+        Self { level: Level::fallback(), packets: false }
+    }
+
+    /// The level's name: `avx2`, `sse4.2`, `neon`, `scalar`, or `unpacked` for
+    /// [`Simd8::unpacked`].
     #[must_use]
     pub fn name(&self) -> &'static str {
+        if !self.packets {
+            return "unpacked";
+        }
         if self.level.is_fallback() {
             return "scalar";
         }
@@ -77,7 +90,7 @@ impl Simd8 {
         "scalar"
     }
 
-    /// Whether this is the scalar fallback.
+    /// Whether this is the scalar fallback (or no packets at all).
     #[must_use]
     pub fn is_scalar(&self) -> bool {
         self.level.is_fallback()
