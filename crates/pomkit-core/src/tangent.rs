@@ -227,7 +227,11 @@ pub fn compute_tangents(
 // ---------------------------------------------------------------------------------------------
 
 fn check_index_count(indices: &[u32]) -> Result<(), TangentError> {
-    if indices.len() % 3 == 0 { Ok(()) } else { Err(TangentError::IndexCountNotMultipleOf3 { count: indices.len() }) }
+    if indices.len().is_multiple_of(3) {
+        Ok(())
+    } else {
+        Err(TangentError::IndexCountNotMultipleOf3 { count: indices.len() })
+    }
 }
 
 fn check_positions(positions: &[Vec3]) -> Result<(), TangentError> {

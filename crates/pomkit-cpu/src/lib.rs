@@ -1064,7 +1064,7 @@ fn finish_packet<S: Simd>(
     let (full, vis, shadow_fetches) = shade8::lit(simd, scene, prep, &inputs, &hit_uv, with_shadows);
     // The LOD fade's normal-mapped fallback, where it differs from the full result.
     let simple: [bool; LANES] = std::array::from_fn(|i| {
-        !(weight[i] >= 1.0 || prep.lod_basis.is_none()) && !(!with_shadows[i] && lane(i).hit_uv == frag(i).v.uv)
+        weight[i] < 1.0 && prep.lod_basis.is_some() && (with_shadows[i] || lane(i).hit_uv != frag(i).v.uv)
     });
     let color = if simple.contains(&true) {
         let uv: [Vec2; LANES] = std::array::from_fn(|i| texture_uv(frag(i).v.uv, edges));

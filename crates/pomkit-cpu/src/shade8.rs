@@ -88,7 +88,7 @@ impl<S: Simd> V3<S> {
     pub fn normalize_or(self, fallback: Self) -> Self {
         let simd = self.x.witness();
         let rcp = simd.splat_f32x8(1.0) / self.dot(self).sqrt();
-        let ok = (rcp - rcp).simd_eq(0.0) & rcp.simd_gt(0.0);
+        let ok = rcp.abs().simd_lt(f32::INFINITY) & rcp.simd_gt(0.0);
         Self::select(ok, self.scale(rcp), fallback)
     }
 }
@@ -111,7 +111,7 @@ fn bilinear<S: Simd>(
     let h = vec8(simd, size.map(|s| s.1 as f32));
     let tx = u * w - 0.5;
     let ty = v * h - 0.5;
-    let ok = (tx - tx).simd_eq(0.0) & (ty - ty).simd_eq(0.0);
+    let ok = tx.abs().simd_lt(f32::INFINITY) & ty.abs().simd_lt(f32::INFINITY);
     let zero = simd.splat_f32x8(0.0);
     let (tx, ty) = (ok.select(tx, zero), ok.select(ty, zero));
     let (x0, y0) = (tx.floor(), ty.floor());

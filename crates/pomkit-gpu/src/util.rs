@@ -89,7 +89,7 @@ impl Std140 {
 
     /// Pads with zeros to a multiple of `align` bytes.
     pub fn pad_to(&mut self, align: usize) -> &mut Self {
-        while (self.words.len() * 4) % align != 0 {
+        while !(self.words.len() * 4).is_multiple_of(align) {
             self.words.push(0);
         }
         self

@@ -387,7 +387,7 @@ fn cones_come_back_with_set_cones_after_a_new_height_field() {
     // Spikes on a floor at depth 0.8 (not 1: rays that end exactly on the volume's floor are
     // counted differently by the f32 and f64 walks).
     let spikes = |k: u32| {
-        HeightField::from_height_fn(96, 96, move |x, y| if (x * 7 + y * 13 + k) % 97 == 0 { 1.0 } else { 0.2 })
+        HeightField::from_height_fn(96, 96, move |x, y| if (x * 7 + y * 13 + k).is_multiple_of(97) { 1.0 } else { 0.2 })
     };
     let cam = Camera {
         eye: Vec3::new(0.0, 0.6, 1.9),

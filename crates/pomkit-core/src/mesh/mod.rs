@@ -399,7 +399,7 @@ impl Mesh {
             && self.uvs.len() == n
             && self.tangents.len() == n
             && self.uv_scale.len() == n
-            && self.indices.len() % 3 == 0
+            && self.indices.len().is_multiple_of(3)
             && self.indices.iter().all(|&i| (i as usize) < n)
             && self.positions.iter().all(|p| p.is_finite())
             && self.normals.iter().all(|v| v.is_finite() && v.length_squared() > 0.0)
@@ -457,16 +457,16 @@ fn prepare(
         }
         .into());
     }
-    if indices.len() % 3 != 0 {
+    if !indices.len().is_multiple_of(3) {
         return Err(TangentError::IndexCountNotMultipleOf3 { count: indices.len() }.into());
     }
     if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
         return Err(TangentError::NonFinitePosition { vertex, value: positions[vertex] }.into());
     }
-    if let Some(n) = &normals {
-        if let Some(vertex) = n.iter().position(|x| !x.is_finite()) {
-            return Err(TangentError::NonFiniteNormal { vertex, value: n[vertex] }.into());
-        }
+    if let Some(n) = &normals
+        && let Some(vertex) = n.iter().position(|x| !x.is_finite())
+    {
+        return Err(TangentError::NonFiniteNormal { vertex, value: n[vertex] }.into());
     }
     if let Some(vertex) = uvs.iter().position(|uv| !uv.is_finite()) {
         return Err(TangentError::NonFiniteUv { vertex, value: uvs[vertex] }.into());
@@ -604,7 +604,7 @@ mod tests {
     /// The invariants every mesh must keep.
     fn assert_valid(m: &Mesh) {
         let n = m.positions.len();
-        assert!(n > 0 && m.indices.len() % 3 == 0 && !m.indices.is_empty());
+        assert!(n > 0 && m.indices.len().is_multiple_of(3) && !m.indices.is_empty());
         assert_eq!((m.normals.len(), m.uvs.len(), m.tangents.len(), m.uv_scale.len()), (n, n, n, n));
         assert!(m.indices.iter().all(|&i| (i as usize) < n));
         for v in 0..n {

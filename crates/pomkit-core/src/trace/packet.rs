@@ -59,7 +59,7 @@ fn array<S: Simd>(v: f32x8<S>) -> [f32; LANES] {
 /// Whether each lane is finite (neither infinite nor NaN).
 #[inline(always)]
 fn finite<S: Simd>(x: f32x8<S>) -> mask32x8<S> {
-    (x - x).simd_eq(0.0)
+    x.abs().simd_lt(f32::INFINITY)
 }
 
 /// Eight lanes' view of a mip chain: each lane reads the two levels around its own level of
@@ -348,7 +348,7 @@ fn steep<S: Simd>(
                 z[k] = t;
             }
         }
-        active = active & !hit;
+        active &= !hit;
     }
     hits_at(rays, z, fetches, out);
 }
@@ -399,7 +399,7 @@ fn pom_classic<S: Simd>(
                 }
             }
         }
-        active = active & !hit;
+        active &= !hit;
         prev_t = splat(simd, t);
         prev_d = d;
     }
@@ -436,14 +436,14 @@ fn pom<S: Simd>(
         }
         let fi = i as f32;
         // The lanes still searching whose count reaches i; the last sample lies at t = 1.
-        active = active & nf.simd_ge(fi);
+        active &= nf.simd_ge(fi);
         let t = nf.simd_eq(fi).select(splat(simd, 1.0), step * fi);
         let d = mips.sample(simd, rays.u0 + rays.su * t, rays.v0 + rays.sv * t);
         count(&mut fetches, bools(active));
         let hit = active & d.simd_le(t);
         b_t = hit.select(t, b_t);
         b_d = hit.select(d, b_d);
-        bracketed = bracketed | hit;
+        bracketed |= hit;
         let go_on = active & !hit;
         a_t = go_on.select(t, a_t);
         a_d = go_on.select(d, a_d);
@@ -546,7 +546,7 @@ pub fn shadow_marches<S: Simd>(
     let mut fetches = [0u32; LANES];
     for i in 1..most {
         let fi = i as f32;
-        active = active & nf.simd_gt(fi);
+        active &= nf.simd_gt(fi);
         if !active.any_true() {
             break;
         }
@@ -557,8 +557,8 @@ pub fn shadow_marches<S: Simd>(
         slope = steeper.select(slope.max((depth - d) / t), slope);
         // Hard: a sample above the ray ends the lane's march in shadow.
         let hits = active & !soft & d.simd_lt(depth - t - 1e-5);
-        blocked = blocked | hits;
-        active = active & !hits;
+        blocked |= hits;
+        active &= !hits;
     }
     let (slope, blocked) = (array(slope), bools(blocked));
     let mut out = [None; LANES];
@@ -714,7 +714,8 @@ mod tests {
         let mut compared = 0;
         for _ in 0..2000 {
             let uv = Vec2::new(rng.next_f32(), rng.next_f32());
-            let light = Ray::at_angle(uv, rng.next_f32() * 1.5, rng.next_f32() * 6.28).dir * Vec3::new(1.0, 1.0, -1.0);
+            let light = Ray::at_angle(uv, rng.next_f32() * 1.5, rng.next_f32() * std::f32::consts::TAU).dir
+                * Vec3::new(1.0, 1.0, -1.0);
             let depth = 0.05 + 0.95 * rng.next_f32();
             let ShadowStart::March(m) = shadow_start(&surface, uv, depth, light, &sp, &TraceParams::default()) else {
                 continue;
