@@ -63,7 +63,8 @@ struct Prepared {
     /// The height map's size in texels and its coarsest mip level, for the level of detail.
     lod_basis: Option<(Vec2, f32)>,
     normals: Option<Arc<NormalMap>>,
-    albedo: Vec<Texture>,
+    /// The albedo and its mip chain (shared between frames while the texture lives).
+    albedo: Arc<Vec<Texture>>,
     technique: Technique,
     params: TraceParams,
     /// The material's depth scale, sanitized ([`pomkit_core::trace::sanitized_depth_scale`]).
@@ -89,9 +90,13 @@ fn sample_albedo(chain: &[Texture], uv: Vec2, lod: f32, edges: EdgeMode) -> Vec3
 }
 
 /// The CPU renderer: `CpuRenderer::new()` then `render(&scene, &options)`.
-#[derive(Debug, Clone, Copy)]
+///
+/// A renderer keeps the mip chains of the albedo textures it has drawn, for as long as those
+/// textures live; everything derived from height maps is made anew every frame.
+#[derive(Debug)]
 pub struct CpuRenderer {
     simd: Simd8,
+    albedo: AlbedoCache,
 }
 
 impl Default for CpuRenderer {
@@ -108,13 +113,13 @@ impl CpuRenderer {
     /// [`Simd8::from_env`] itself).
     #[must_use]
     pub fn new() -> Self {
-        Self { simd: Simd8::from_env().unwrap_or_else(|_| Simd8::detect()) }
+        Self { simd: Simd8::from_env().unwrap_or_else(|_| Simd8::detect()), albedo: AlbedoCache::default() }
     }
 
     /// A renderer shading its packets with `simd`.
     #[must_use]
     pub fn with_simd(simd: Simd8) -> Self {
-        Self { simd }
+        Self { simd, albedo: AlbedoCache::default() }
     }
 
     /// The SIMD level the renderer shades with.
@@ -143,7 +148,8 @@ impl CpuRenderer {
         let (w, h) = (opts.width, opts.height);
         let (sw, sh) = (w * ss, h * ss);
         estimate(scene, opts).check(|| describe_job(opts), &advice(scene, opts))?;
-        let prepared = prepare(scene, opts);
+        let albedo = self.albedo.chains(scene);
+        let prepared = prepare(scene, opts, &albedo);
         let aspect = sw as f32 / sh as f32;
         let vp = scene.camera.projection(aspect) * scene.camera.view();
         let triangles = self.triangles(scene, &prepared, opts, vp, (sw, sh))?;
@@ -499,11 +505,12 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
 
 /// Prepares every material (after [`validate`]): surfaces for tracing, normal maps (baked when
 /// absent), albedo mips.
-fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
+fn prepare(scene: &Scene, opts: &RenderOptions, albedo: &[Arc<Vec<Texture>>]) -> Vec<Prepared> {
     scene
         .materials
         .par_iter()
-        .map(|m| {
+        .enumerate()
+        .map(|(i, m)| {
             let technique = opts.mode.technique(m.technique);
             let params = m.trace.sanitized();
             let (depth_scale, edges) = (sanitized_depth_scale(m.depth_scale), m.edges);
@@ -540,11 +547,7 @@ fn prepare(scene: &Scene, opts: &RenderOptions) -> Vec<Prepared> {
                 }
                 _ => None,
             };
-            let mut albedo = vec![m.albedo.as_ref().map_or_else(|| Texture::constant(Vec3::ONE), |t| (**t).clone())];
-            while let Some(last) = albedo.last().filter(|t| t.width() > 1 || t.height() > 1) {
-                let next = last.downsample();
-                albedo.push(next);
-            }
+            let albedo = albedo[i].clone();
             Prepared { material: m.clone(), surface, lod_basis, normals, albedo, technique, params, depth_scale, edges }
         })
         .collect()
@@ -559,6 +562,63 @@ fn coarsest_level(mut w: u32, mut h: u32) -> f32 {
         k += 1;
     }
     k as f32
+}
+
+/// A texture and its mip chain down to 1 x 1.
+fn mip_chain(texture: Texture) -> Vec<Texture> {
+    let mut chain = vec![texture];
+    while let Some(last) = chain.last().filter(|t| t.width() > 1 || t.height() > 1) {
+        let next = last.downsample();
+        chain.push(next);
+    }
+    chain
+}
+
+/// The albedo mip chains of the frames so far, by texture: a texture is immutable once shared
+/// (`Arc<Texture>`), so its chain holds for as long as it lives. Height maps, which may change
+/// from frame to frame (dynamic height fields), are prepared anew every frame.
+#[derive(Debug, Default)]
+struct AlbedoCache {
+    chains: Vec<(std::sync::Weak<Texture>, Arc<Vec<Texture>>)>,
+}
+
+impl AlbedoCache {
+    /// Each material's albedo chain (a white texel for a material without an albedo map),
+    /// built where the cache has none; chains of textures dropped since are forgotten.
+    fn chains(&mut self, scene: &Scene) -> Vec<Arc<Vec<Texture>>> {
+        self.chains.retain(|(t, _)| t.strong_count() > 0);
+        let known = |t: &Arc<Texture>| {
+            self.chains.iter().find(|(w, _)| std::ptr::eq(w.as_ptr(), Arc::as_ptr(t))).map(|(_, c)| c.clone())
+        };
+        let found: Vec<Option<Arc<Vec<Texture>>>> =
+            scene.materials.iter().map(|m| m.albedo.as_ref().and_then(known)).collect();
+        let built: Vec<Arc<Vec<Texture>>> = scene
+            .materials
+            .par_iter()
+            .zip(found)
+            .map(|(m, found)| {
+                found.unwrap_or_else(|| {
+                    Arc::new(mip_chain(
+                        m.albedo.as_ref().map_or_else(|| Texture::constant(Vec3::ONE), |t| (**t).clone()),
+                    ))
+                })
+            })
+            .collect();
+        let new: Vec<(std::sync::Weak<Texture>, Arc<Vec<Texture>>)> = scene
+            .materials
+            .iter()
+            .zip(&built)
+            .filter_map(|(m, chain)| {
+                m.albedo.as_ref().filter(|t| known(t).is_none()).map(|t| (Arc::downgrade(t), chain.clone()))
+            })
+            .collect();
+        for entry in new {
+            if !self.chains.iter().any(|(w, _)| w.ptr_eq(&entry.0)) {
+                self.chains.push(entry);
+            }
+        }
+        built
+    }
 }
 
 /// Pixel rows per band: each band's samples are shaded (tile by tile, in parallel) and
@@ -838,8 +898,7 @@ struct Lane {
 
 /// The fragment stage up to the trace: the tangent frame, the eye direction, the mip level and
 /// the view ray.
-fn begin(scene: &Scene, prep: &Prepared, f: &Fragment) -> Lane {
-    let m = &prep.material;
+fn begin(scene: &Scene, prep: &Prepared, f: &Fragment, (lod, weight): (f32, f32)) -> Lane {
     let v = &f.v;
     // Tangent frame, re-orthonormalized after interpolation (Lengyel Listing 7.8).
     let n = v.normal.try_normalize().unwrap_or(Vec3::Z);
@@ -849,14 +908,6 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment) -> Lane {
     let b = n.cross(t) * sign;
     let tangent = Vec4::new(t.x, t.y, t.z, sign);
     let to_eye = (scene.camera.eye - v.world).try_normalize().unwrap_or(n);
-    // Mip level of the height map from the quad's UV gradients, fixed before any loop.
-    let (lod, weight) = match prep.lod_basis {
-        Some((size, coarsest)) => {
-            let lod = mip_level_from_gradients(f.duv_dx, f.duv_dy, size, coarsest);
-            (lod, lod_weight(lod, m.lod_threshold))
-        }
-        None => (0.0, 0.0),
-    };
     // World directions to tangent space, for the view ray and the shadow rays.
     let map =
         if prep.technique.displaces() || shadows_cast(prep) { TangentMap::new(n, tangent, v.uv_scale) } else { None };
@@ -891,6 +942,33 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment) -> Lane {
     lane
 }
 
+/// The mip level of the height map from the quad's UV gradients (fixed before any loop), and
+/// the weight of the full technique in the LOD fade.
+fn level_of(prep: &Prepared, f: &Fragment) -> (f32, f32) {
+    match prep.lod_basis {
+        Some((size, coarsest)) => {
+            let lod = mip_level_from_gradients(f.duv_dx, f.duv_dy, size, coarsest);
+            (lod, lod_weight(lod, prep.material.lod_threshold))
+        }
+        None => (0.0, 0.0),
+    }
+}
+
+/// `level(f)` for each of `frags`, computed once per quad: the fragments of a quad share their
+/// UV gradients, and consecutive fragments with the same gradients get the same value.
+fn per_quad<T: Copy + Default>(frags: &[Fragment], level: impl Fn(&Fragment) -> T) -> [T; LANES] {
+    let mut out = [T::default(); LANES];
+    let mut last: Option<(Vec2, Vec2, T)> = None;
+    for (o, f) in out.iter_mut().zip(frags) {
+        *o = match last {
+            Some((dx, dy, v)) if dx == f.duv_dx && dy == f.duv_dy => v,
+            _ => level(f),
+        };
+        last = Some((f.duv_dx, f.duv_dy, *o));
+    }
+    out
+}
+
 /// Whether the fragment's view ray is traced. With silhouettes the ray is traced even where
 /// the LOD fade shows normal mapping only: the relief's outline is decided there too (the rim
 /// of a curved mesh, seen at grazing angles, is where the mip level is highest).
@@ -921,7 +999,7 @@ fn take_hit(prep: &Prepared, surface: &Surface, lane: &mut Lane, hit: &Hit) {
 /// The fragment stage for one fragment; `None` discards it (a silhouette ray that left the
 /// relief).
 fn shade(scene: &Scene, prep: &Prepared, shading: &Shading, f: &Fragment) -> Option<Sample> {
-    let mut lane = begin(scene, prep, f);
+    let mut lane = begin(scene, prep, f, level_of(prep, f));
     if traces(prep, &lane)
         && let Some(surface) = &prep.surface
     {
@@ -973,8 +1051,9 @@ fn shade_packet<S: Simd>(
     let mut lanes: [Option<Lane>; LANES] = [None; LANES];
     let mut rays = [None; LANES];
     let mut lods = [0.0; LANES];
+    let levels = per_quad(frags, |f| level_of(prep, f));
     for (i, f) in frags.iter().enumerate() {
-        let lane = begin(scene, prep, f);
+        let lane = begin(scene, prep, f, levels[i]);
         if traces(prep, &lane) {
             rays[i] = Some(Ray::new(f.v.uv, lane.dir));
         }
@@ -1055,7 +1134,7 @@ fn finish_packet<S: Simd>(
         b: shade8::V3::from_lanes(simd, &pick(&|l| l.b)),
         to_eye: shade8::V3::from_lanes(simd, &pick(&|l| l.to_eye)),
         world: std::array::from_fn(|i| frag(i).v.world),
-        albedo_lods: std::array::from_fn(|i| albedo_level(&prep.albedo, frag(i).duv_dx, frag(i).duv_dy)),
+        albedo_lods: per_quad(frags, |f| albedo_level(&prep.albedo, f.duv_dx, f.duv_dy)),
         shadows,
     };
     let weight: [f32; LANES] = std::array::from_fn(|i| lane(i).weight);
@@ -1218,6 +1297,30 @@ mod tests {
             bytes += a.uv.len() * 8 + (a.depth.len() + a.shadow.len() + a.fetches.len() + a.lod.len()) * 4;
         }
         bytes as u64
+    }
+
+    #[test]
+    fn a_renderer_reuses_albedo_chains_only_for_the_same_live_texture() {
+        let opts = RenderOptions { width: 48, height: 27, ..Default::default() };
+        let mut scene = demo_scene_sized(32);
+        let fresh = |scene: &Scene| CpuRenderer::new().render(scene, &opts, &|_, _| {}).unwrap().color;
+        let mut r = CpuRenderer::new();
+        let first = r.render(&scene, &opts, &|_, _| {}).unwrap().color;
+        let textured = scene.materials.iter().filter(|m| m.albedo.is_some()).count();
+        assert!(textured > 0 && r.albedo.chains.len() == textured, "{} chains", r.albedo.chains.len());
+        assert_eq!(r.render(&scene, &opts, &|_, _| {}).unwrap().color, first);
+        // A new texture (here: another one's, darkened) is a new chain, never a stale one.
+        for m in &mut scene.materials {
+            if let Some(t) = &m.albedo {
+                let dark: Vec<Vec3> = t.texels().iter().map(|c| *c * 0.25).collect();
+                m.albedo = Some(Arc::new(Texture::new(t.width(), t.height(), dark).unwrap()));
+            }
+        }
+        let second = r.render(&scene, &opts, &|_, _| {}).unwrap().color;
+        assert_ne!(second, first);
+        assert_eq!(second, fresh(&scene));
+        // The first textures are gone: so are their chains.
+        assert_eq!(r.albedo.chains.len(), textured);
     }
 
     #[test]

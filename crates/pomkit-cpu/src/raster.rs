@@ -83,6 +83,9 @@ pub struct ScreenTriangle {
     fixed: [[i64; 2]; 3],
     /// Twice the signed area in squared 1/256 pixels (positive after setup).
     area2: i128,
+    /// Every fixed-point coordinate below 2^29 in magnitude: the edge functions at points as
+    /// small fit in i64 (differences below 2^30, products below 2^60).
+    small: bool,
     /// Least depth of the three vertices, for front-to-back ordering.
     pub min_z: f32,
 }
@@ -221,7 +224,19 @@ pub fn setup(tri: &[ClipVertex; 3], width: u32, height: u32, object: u32, cull: 
         area2 = -area2;
     }
     let min_z = z[0].min(z[1]).min(z[2]);
-    Some(ScreenTriangle { p, z, inv_w, v, object, fixed, area2, min_z })
+    let small = fixed.iter().flatten().all(|c| c.abs() < SMALL);
+    Some(ScreenTriangle { p, z, inv_w, v, object, fixed, area2, small, min_z })
+}
+
+/// The bound below which fixed-point coordinates take the i64 edge functions.
+const SMALL: i64 = 1 << 29;
+
+/// `(b - a) x (q - a)` on fixed-point positions below [`SMALL`] in magnitude, exactly.
+#[inline]
+fn edge_function_small(a: [i64; 2], b: [i64; 2], q: [i64; 2]) -> i128 {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let r = [q[0] - a[0], q[1] - a[1]];
+    i128::from(d[0] * r[1] - d[1] * r[0])
 }
 
 /// `(b - a) x (q - a)` on fixed-point positions, exactly.
@@ -250,34 +265,40 @@ pub struct Fragment {
 }
 
 impl ScreenTriangle {
-    /// Edge functions at the fixed-point screen point `q` (1/256 pixel units), normalized to
-    /// barycentric weights (not perspective corrected), and whether `q` is covered under the
-    /// top-left rule.
-    fn barycentric(&self, q: [i64; 2]) -> (Vec3, bool) {
+    /// The three edge functions at fixed-point point `q`: in i64 where the triangle and the
+    /// point are [`SMALL`], else in i128 (the same values).
+    #[inline]
+    fn edges_at(&self, q: [i64; 2]) -> [i128; 3] {
         let [a, b, c] = self.fixed;
-        let w0 = edge_function(b, c, q);
-        let w1 = edge_function(c, a, q);
-        let w2 = edge_function(a, b, q);
+        if self.small && q[0].abs() < SMALL && q[1].abs() < SMALL {
+            [edge_function_small(b, c, q), edge_function_small(c, a, q), edge_function_small(a, b, q)]
+        } else {
+            [edge_function(b, c, q), edge_function(c, a, q), edge_function(a, b, q)]
+        }
+    }
+
+    /// Barycentric weights (not perspective corrected) from the edge functions, and whether the
+    /// point is covered under the top-left rule.
+    #[inline]
+    fn weights(&self, [w0, w1, w2]: [i128; 3]) -> (Vec3, bool) {
+        let [a, b, c] = self.fixed;
         let covered = edge_ok(w0, b, c) && edge_ok(w1, c, a) && edge_ok(w2, a, b);
         let area = self.area2 as f64;
         let bary = Vec3::new((w0 as f64 / area) as f32, (w1 as f64 / area) as f32, (w2 as f64 / area) as f32);
         (bary, covered)
     }
 
-    /// Whether the centre of pixel `(x, y)` is covered (top-left rule), as
-    /// [`ScreenTriangle::barycentric`] decides it.
+    /// Whether edge functions `w` put their point inside (top-left rule).
     #[inline]
-    fn covers(&self, x: u32, y: u32) -> bool {
-        let q = [i64::from(x) * 256 + 128, i64::from(y) * 256 + 128];
+    fn covered_by(&self, [w0, w1, w2]: [i128; 3]) -> bool {
         let [a, b, c] = self.fixed;
-        edge_ok(edge_function(b, c, q), b, c)
-            && edge_ok(edge_function(c, a, q), c, a)
-            && edge_ok(edge_function(a, b, q), a, b)
+        edge_ok(w0, b, c) && edge_ok(w1, c, a) && edge_ok(w2, a, b)
     }
 
-    /// Perspective-correct varyings and depth at the centre of pixel `(x, y)`.
-    fn interpolate(&self, x: u32, y: u32) -> (Varyings, f32, bool) {
-        self.interpolate_fixed([i64::from(x) * 256 + 128, i64::from(y) * 256 + 128])
+    /// The fixed-point centre of pixel `(x, y)`.
+    #[inline]
+    fn centre(x: u32, y: u32) -> [i64; 2] {
+        [i64::from(x) * 256 + 128, i64::from(y) * 256 + 128]
     }
 
     /// Perspective-correct varyings and depth at screen point `q` (pixels).
@@ -288,8 +309,14 @@ impl ScreenTriangle {
     }
 
     /// Perspective-correct varyings and depth at fixed-point screen point `q`.
+    #[cfg(test)]
     fn interpolate_fixed(&self, q: [i64; 2]) -> (Varyings, f32, bool) {
-        let (b, covered) = self.barycentric(q);
+        self.interpolate_edges(self.edges_at(q))
+    }
+
+    /// Perspective-correct varyings and depth at the point of edge functions `w`.
+    fn interpolate_edges(&self, w: [i128; 3]) -> (Varyings, f32, bool) {
+        let (b, covered) = self.weights(w);
         let z = b.x * self.z[0] + b.y * self.z[1] + b.z * self.z[2];
         let pw = Vec3::new(b.x * self.inv_w[0], b.y * self.inv_w[1], b.z * self.inv_w[2]);
         let sum = pw.x + pw.y + pw.z;
@@ -323,15 +350,16 @@ impl ScreenTriangle {
                 // Coverage first (exact integers only): a quad the triangle misses costs no
                 // interpolation.
                 let mut covered = [false; 4];
+                let mut edges = [[0i128; 3]; 4];
                 for (k, c) in covered.iter_mut().enumerate() {
                     let (x, y) = (qx + (k & 1) as u32, qy + (k >> 1) as u32);
-                    *c = x >= x0 && x < x1 && y >= y0 && y < y1 && self.covers(x, y);
+                    edges[k] = self.edges_at(Self::centre(x, y));
+                    *c = x >= x0 && x < x1 && y >= y0 && y < y1 && self.covered_by(edges[k]);
                 }
                 if covered.iter().any(|&c| c) {
                     let mut px = [(Varyings::default(), 0.0f32, false); 4];
                     for (k, slot) in px.iter_mut().enumerate() {
-                        let (dx, dy) = ((k & 1) as u32, (k >> 1) as u32);
-                        *slot = self.interpolate(qx + dx, qy + dy);
+                        *slot = self.interpolate_edges(edges[k]);
                         slot.2 = covered[k];
                     }
                     // Coarse derivatives, as a GPU's ddx/ddy: differences across the quad.
