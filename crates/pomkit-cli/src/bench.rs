@@ -267,9 +267,11 @@ fn caption(
     }
     if cpu_runs > 0 {
         parts.push(format!(
-            "CPU: pomkit-cpu on {} thread(s); median of {cpu_runs} frame(s) per technique after one warm-up, \
-             whole render call{}.",
+            "CPU: pomkit-cpu on {} thread(s), shading packets of 8 fragments with {} SIMD (CPU features: {}); \
+             median of {cpu_runs} frame(s) per technique after one warm-up, whole render call{}.",
             rayon::current_num_threads(),
+            pomkit_cpu::Simd8::from_env().unwrap_or_else(|_| pomkit_cpu::Simd8::detect()).name(),
+            pomkit_cpu::cpu_features(),
             if a.displaced { ", tessellation included for displaced" } else { "" }
         ));
     }

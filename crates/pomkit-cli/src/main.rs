@@ -343,6 +343,11 @@ fn private_runtime_dir() -> Option<PathBuf> {
 fn main() -> ExitCode {
     ensure_runtime_dir();
     let cli = Cli::parse();
+    // The CPU renderer's SIMD level (POMKIT_SIMD): a value it does not know is bad input.
+    if let Err(e) = pomkit_cpu::Simd8::from_env() {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     let result = match &cli.verb {
         Verb::Render(args) => render::run(args),
         Verb::Bake(verb) => bake::run(verb),

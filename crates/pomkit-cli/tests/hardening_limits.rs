@@ -234,6 +234,20 @@ fn a_malformed_memory_limit_is_refused() {
 }
 
 #[test]
+fn an_unknown_simd_level_is_refused_and_the_scalar_one_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["render", "--size", "64x36", "--backend", "cpu", "-o", "o.png"];
+    refuses_env(&args, dir.path(), &[("POMKIT_SIMD", "avx9")], &["POMKIT_SIMD=\"avx9\" is not a SIMD level", "scalar"]);
+    // The scalar fallback draws what the detected level draws, byte for byte.
+    let detected = pomkit_env(&args, dir.path(), &[("POMKIT_SIMD", "auto")]);
+    assert!(detected.status.success(), "{}", String::from_utf8_lossy(&detected.stderr));
+    let auto = std::fs::read(dir.path().join("o.png")).unwrap();
+    let scalar = pomkit_env(&args, dir.path(), &[("POMKIT_SIMD", "scalar")]);
+    assert!(scalar.status.success(), "{}", String::from_utf8_lossy(&scalar.stderr));
+    assert_eq!(std::fs::read(dir.path().join("o.png")).unwrap(), auto);
+}
+
+#[test]
 fn a_gpu_frame_over_the_adapters_limits_says_what_to_do() {
     let limits = match pomkit_gpu::GpuContext::new() {
         Ok(ctx) => ctx.device.limits(),

@@ -87,7 +87,7 @@ impl<'a> Levels<'a> {
         for (i, &lod) in lods.iter().enumerate() {
             // MipChain::sample's level choice, lane by lane.
             let lod = if lod.is_finite() { lod.clamp(0.0, chain.max_level()) } else { 0.0 };
-            let k = lod.floor() as usize;
+            let k = crate::heightfield::floor(lod) as usize;
             let f = lod - k as f32;
             l.a[i] = chain.level(k);
             if !(f <= 0.0 || k + 1 >= chain.len()) {
@@ -139,17 +139,39 @@ fn bilinear<S: Simd>(simd: S, fields: &[&HeightField; LANES], u: f32x8<S>, v: f3
             c[2][i] = d[below];
             c[3][i] = d[below + 1];
         } else {
-            let (x1, y1) = (x.saturating_add(1), y.saturating_add(1));
-            c[0][i] = f.depth_at(x, y, edges);
-            c[1][i] = f.depth_at(x1, y, edges);
-            c[2][i] = f.depth_at(x, y1, edges);
-            c[3][i] = f.depth_at(x1, y1, edges);
+            // The texels depth_at would read, each coordinate resolved once.
+            let (xa, xb) = resolve_pair(x, f.width(), edges);
+            let (ya, yb) = resolve_pair(y, f.height(), edges);
+            let (d, w) = (f.depths(), f.width() as usize);
+            c[0][i] = d[ya * w + xa];
+            c[1][i] = d[ya * w + xb];
+            c[2][i] = d[yb * w + xa];
+            c[3][i] = d[yb * w + xb];
         }
     }
     let [d00, d10, d01, d11] = c.map(|a| vec(simd, a));
     let top = d00 + (d10 - d00) * fx;
     let bottom = d01 + (d11 - d01) * fx;
     top + (bottom - top) * fy
+}
+
+/// `(edges.resolve(i, size), edges.resolve(i + 1, size))` (the neighbour saturating, as
+/// [`HeightField::sample_bilinear`] forms it), as indices.
+#[inline(always)]
+fn resolve_pair(i: i64, size: u32, edges: EdgeMode) -> (usize, usize) {
+    let a = edges.resolve(i, size);
+    let b = match edges {
+        // The wrapped neighbour of a wrapped coordinate: one step on, or back to 0.
+        EdgeMode::Wrap if i < i64::MAX => {
+            if a + 1 == size {
+                0
+            } else {
+                a + 1
+            }
+        }
+        _ => edges.resolve(i.saturating_add(1), size),
+    };
+    (a as usize, b as usize)
 }
 
 /// [`line_intersection`] in every lane.
