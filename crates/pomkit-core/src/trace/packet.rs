@@ -6,7 +6,7 @@
 //! halves), on NEON (two halves) and on the crate's scalar fallback, chosen at run time by the
 //! caller's [`fearless_simd::dispatch!`].
 //!
-//! Every lane computes exactly what [`trace`] and [`crate::shadow::shadow`] compute for its
+//! Every lane computes exactly what [`super::trace()`] and [`crate::shadow::shadow`] compute for its
 //! ray, operation for operation in the same order (no fused multiply-adds), so a packet's hits
 //! are bit-identical to the single rays' (the tests compare them lane by lane). Lanes leave a
 //! loop at their own step under a mask; the packet's loop runs until no lane is active. The
