@@ -189,6 +189,11 @@ impl CpuRenderer {
             Shading {
                 level: self.simd.level,
                 packets: self.simd.packets,
+                // (Not for unpacked: it is the reference, drawn as fragments arrive.)
+                visibility_first: self.simd.packets
+                    && prepared
+                        .iter()
+                        .all(|p| !silhouettes(p) && !(p.material.pixel_depth_offset && p.technique.displaces())),
                 lod_tint: opts.lod_tint,
                 depth_matrix: scene.camera.projection(1.0) * scene.camera.view(),
             },
@@ -768,10 +773,21 @@ fn shade_tile(
     let (x1, y1) = ((x0 + TILE).min(sw), (y0 + TILE).min(sh));
     let tw = x1 - x0;
     let mut buf: Vec<Option<Sample>> = vec![None; (tw * (y1 - y0)) as usize];
+    // With visibility first, the triangles only find each sample's nearest fragment; the
+    // visible ones are shaded at the end, in full packets.
+    let mut visible: Vec<Option<(u32, Fragment)>> =
+        if shading.visibility_first { vec![None; buf.len()] } else { Vec::new() };
+    let mut draw = |tri: &ScreenTriangle, buf: &mut Vec<Option<Sample>>| {
+        if shading.visibility_first {
+            draw_visible(tri, (x0, y0, x1, y1), &mut visible);
+        } else {
+            draw(scene, prepared, tri, (x0, y0, x1, y1), shading, buf);
+        }
+    };
     let mut block = BlockVertices::default();
     for &(_, item) in bin {
         match item {
-            Item::Triangle(ti) => draw(scene, prepared, &tris[ti as usize], (x0, y0, x1, y1), shading, &mut buf),
+            Item::Triangle(ti) => draw(&tris[ti as usize], &mut buf),
             Item::Block(si, b) => {
                 streamed.vertices(si as usize, b as usize, &mut block);
                 let object = streamed.streams[si as usize].object;
@@ -782,7 +798,7 @@ fn shade_tile(
                     if needs_clipping(&t) {
                         for c in clip_near(t) {
                             if let Some(st) = setup(&c, sw, sh, object, true) {
-                                draw(scene, prepared, &st, (x0, y0, x1, y1), shading, &mut buf);
+                                draw(&st, &mut buf);
                             }
                         }
                         continue;
@@ -793,11 +809,14 @@ fn shade_tile(
                         continue;
                     }
                     if let Some(st) = setup(&t, sw, sh, object, true) {
-                        draw(scene, prepared, &st, (x0, y0, x1, y1), shading, &mut buf);
+                        draw(&st, &mut buf);
                     }
                 }
             }
         }
+    }
+    if shading.visibility_first {
+        shade_visible(scene, prepared, &visible, tw, shading, &mut buf);
     }
     buf
 }
@@ -813,36 +832,8 @@ fn draw(
     buf: &mut [Option<Sample>],
 ) {
     let tw = x1 - x0;
-    let obj = &scene.objects[tri.object as usize];
-    let prep = &prepared[obj.material];
-    let mut packet: Vec<Fragment> = Vec::with_capacity(LANES);
-    let mut slots = [0usize; LANES];
-    let mut shadows = Vec::with_capacity(scene.lights.len());
-    let mut flush = |packet: &mut Vec<Fragment>, slots: &[usize; LANES], buf: &mut [Option<Sample>]| {
-        let mut out = [None; LANES];
-        let level = shading.level;
-        if shading.packets {
-            dispatch!(level, simd => shade_packet(simd, scene, prep, &shading, packet, &mut shadows, &mut out));
-        } else {
-            for (o, f) in out.iter_mut().zip(packet.iter()) {
-                *o = shade(scene, prep, &shading, f);
-            }
-        }
-        for (k, s) in out.into_iter().enumerate().take(packet.len()) {
-            // A silhouette pixel whose ray leaves the relief is discarded: it writes nothing.
-            let Some(mut s) = s else { continue };
-            if shading.lod_tint && prep.lod_basis.is_some() {
-                let w = lod_weight(s.lod, prep.material.lod_threshold);
-                let tint = Vec3::new(1.0, 0.25, 0.2).lerp(Vec3::new(0.25, 1.0, 0.3), w);
-                s.color = s.color * 0.5 + tint * 0.5 * s.color.length().max(0.05);
-            }
-            let slot = &mut buf[slots[k]];
-            if slot.is_none_or(|old| s.z < old.z) {
-                *slot = Some(s);
-            }
-        }
-        packet.clear();
-    };
+    let prep = &prepared[scene.objects[tri.object as usize].material];
+    let mut packet = Packet::default();
     tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
         let at = ((f.y - y0) * tw + (f.x - x0)) as usize;
         // Early depth test with the polygon's depth: the displaced depth is never nearer, so a
@@ -851,14 +842,114 @@ fn draw(
         if buf[at].is_some_and(|s| s.z <= f.z) {
             return;
         }
-        slots[packet.len()] = at;
-        packet.push(*f);
-        if packet.len() == LANES {
-            flush(&mut packet, &slots, buf);
+        if packet.push(*f, at) {
+            packet.shade_into(scene, prep, shading, buf);
         }
     });
-    if !packet.is_empty() {
-        flush(&mut packet, &slots, buf);
+    packet.shade_into(scene, prep, shading, buf);
+}
+
+/// Rasterizes `tri` into the tile `[x0, x1) x [y0, y1)` for a visibility pass: `visible` keeps
+/// each sample's nearest fragment (the first drawn among equals) and its object, unshaded.
+fn draw_visible(tri: &ScreenTriangle, (x0, y0, x1, y1): (u32, u32, u32, u32), visible: &mut [Option<(u32, Fragment)>]) {
+    let tw = x1 - x0;
+    tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
+        let slot = &mut visible[((f.y - y0) * tw + (f.x - x0)) as usize];
+        if slot.is_none_or(|(_, v)| f.z < v.z) {
+            *slot = Some((tri.object, *f));
+        }
+    });
+}
+
+/// Shades the visible fragments of a tile `tw` samples wide ([`draw_visible`]) into `buf`,
+/// eight at a time per material, gathered quad by quad.
+fn shade_visible(
+    scene: &Scene,
+    prepared: &[Prepared],
+    visible: &[Option<(u32, Fragment)>],
+    tw: u32,
+    shading: Shading,
+    buf: &mut [Option<Sample>],
+) {
+    let th = visible.len() as u32 / tw.max(1);
+    // One open packet per material seen in the tile.
+    let mut open: Vec<(usize, Packet)> = Vec::new();
+    for qy in (0..th).step_by(2) {
+        for qx in (0..tw).step_by(2) {
+            for k in 0..4 {
+                let (x, y) = (qx + (k & 1), qy + (k >> 1));
+                if x >= tw || y >= th {
+                    continue;
+                }
+                let at = (y * tw + x) as usize;
+                let Some((object, f)) = visible[at] else { continue };
+                let material = scene.objects[object as usize].material;
+                let i = match open.iter().position(|(m, _)| *m == material) {
+                    Some(i) => i,
+                    None => {
+                        open.push((material, Packet::default()));
+                        open.len() - 1
+                    }
+                };
+                let (m, packet) = &mut open[i];
+                if packet.push(f, at) {
+                    packet.shade_into(scene, &prepared[*m], shading, buf);
+                }
+            }
+        }
+    }
+    for (m, mut packet) in open {
+        packet.shade_into(scene, &prepared[m], shading, buf);
+    }
+}
+
+/// Up to [`LANES`] fragments of one material waiting to be shaded, and the samples they go to.
+#[derive(Default)]
+struct Packet {
+    frags: Vec<Fragment>,
+    slots: [usize; LANES],
+    /// Scratch: each light's shadows of the packet.
+    shadows: Vec<[Option<Shadow>; LANES]>,
+}
+
+impl Packet {
+    /// Adds fragment `f` for sample `slot`; true when the packet is full.
+    fn push(&mut self, f: Fragment, slot: usize) -> bool {
+        self.slots[self.frags.len()] = slot;
+        self.frags.push(f);
+        self.frags.len() == LANES
+    }
+
+    /// Shades the packet's fragments ([`shade_packet`], or one at a time for
+    /// [`Simd8::unpacked`]) and writes those nearer than what `buf` holds; empties the packet.
+    fn shade_into(&mut self, scene: &Scene, prep: &Prepared, shading: Shading, buf: &mut [Option<Sample>]) {
+        if self.frags.is_empty() {
+            return;
+        }
+        let mut out = [None; LANES];
+        let level = shading.level;
+        if shading.packets {
+            let (frags, shadows) = (&self.frags, &mut self.shadows);
+            dispatch!(level, simd => shade_packet(simd, scene, prep, &shading, frags, shadows, &mut out));
+        } else {
+            for (o, f) in out.iter_mut().zip(&self.frags) {
+                *o = shade(scene, prep, &shading, f);
+            }
+        }
+        for (k, s) in out.into_iter().enumerate().take(self.frags.len()) {
+            // A silhouette pixel whose ray leaves the relief is discarded: it writes nothing.
+            let Some(mut s) = s else { continue };
+            if shading.lod_tint && prep.lod_basis.is_some() {
+                let w = lod_weight(s.lod, prep.material.lod_threshold);
+                let tint = Vec3::new(1.0, 0.25, 0.2).lerp(Vec3::new(0.25, 1.0, 0.3), w);
+                s.color = s.color * 0.5 + tint * 0.5 * s.color.length().max(0.05);
+            }
+            let slot = &mut buf[self.slots[k]];
+            if slot.is_none_or(|old| s.z < old.z) {
+                *slot = Some(s);
+            }
+        }
+        self.frags.clear();
     }
 }
 
@@ -868,6 +959,9 @@ struct Shading {
     level: Level,
     /// Packets of eight fragments, or one fragment at a time ([`Simd8::unpacked`]).
     packets: bool,
+    /// Every fragment's depth is its polygon's and none is discarded (no pixel depth offset, no
+    /// silhouettes): each tile finds its visible fragments first and shades only those.
+    visibility_first: bool,
     lod_tint: bool,
     /// The camera's view-projection at aspect 1, for the pixel depth offset (NDC depth does not
     /// depend on the aspect).

@@ -30,13 +30,15 @@ fn assert_same(a: &RenderOutput, b: &RenderOutput, what: &str) {
 }
 
 /// The demo scene with every material in `shadow` mode, a point light besides the sun, the LOD
-/// fade early (so the fade's blend shows) and, on every other material, a pixel depth offset.
-fn variant(shadow: ShadowMode) -> Scene {
+/// fade early (so the fade's blend shows) and, with `offsets`, a pixel depth offset on every
+/// other material (without, the packets shade each tile's visible fragments after finding them,
+/// rather than fragments as they arrive).
+fn variant(shadow: ShadowMode, offsets: bool) -> Scene {
     let mut scene = demo_scene_sized(64);
     for (i, m) in scene.materials.iter_mut().enumerate() {
         m.shadow.mode = shadow;
         m.lod_threshold = 2.5;
-        m.pixel_depth_offset = i % 2 == 0;
+        m.pixel_depth_offset = offsets && i % 2 == 0;
     }
     scene.lights.push(Light::Point {
         position: Vec3::new(0.5, 1.2, 1.5),
@@ -50,8 +52,8 @@ fn variant(shadow: ShadowMode) -> Scene {
 fn packets_render_what_single_fragments_render_on_every_level() {
     let levels = [("detected", Simd8::detect()), ("scalar", Simd8::scalar())];
     let mut shaded = 0;
-    for shadow in ShadowMode::ALL {
-        let scene = variant(shadow);
+    for (shadow, offsets) in ShadowMode::ALL.into_iter().flat_map(|s| [(s, false), (s, true)]) {
+        let scene = variant(shadow, offsets);
         let modes = Technique::ALL.into_iter().map(Mode::Technique).chain([Mode::Material, Mode::Displaced]);
         for mode in modes {
             let reference = render(&scene, mode, Simd8::unpacked());
@@ -67,5 +69,5 @@ fn packets_render_what_single_fragments_render_on_every_level() {
             shaded += 1;
         }
     }
-    assert_eq!(shaded, ShadowMode::ALL.len() * (Technique::ALL.len() + 2));
+    assert_eq!(shaded, 2 * ShadowMode::ALL.len() * (Technique::ALL.len() + 2));
 }
