@@ -193,7 +193,7 @@ impl CpuRenderer {
                 visibility_first: self.simd.packets
                     && prepared
                         .iter()
-                        .all(|p| !silhouettes(p) && !(p.material.pixel_depth_offset && p.technique.displaces())),
+                        .all(|p| !(silhouettes(p) || p.material.pixel_depth_offset && p.technique.displaces())),
                 lod_tint: opts.lod_tint,
                 depth_matrix: scene.camera.projection(1.0) * scene.camera.view(),
             },
