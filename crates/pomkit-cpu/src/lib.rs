@@ -484,6 +484,12 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
         "sample bands",
         threads.saturating_mul(2).saturating_mul(band).min(2 * bytes_of::<Option<Sample>>(w * h * ss * ss)),
     );
+    // Each tile being shaded: its samples, and with visibility first its nearest fragments.
+    let tile = u64::from(TILE) * u64::from(TILE);
+    e.add(
+        "tiles in flight",
+        threads.saturating_mul(tile * (bytes_of::<Option<Sample>>(1) + bytes_of::<Option<(u32, Fragment)>>(1))),
+    );
     let g = geometry_counts(scene, opts);
     let tiles = (w * ss).div_ceil(u64::from(TILE)) * (h * ss).div_ceil(u64::from(TILE));
     e.add("triangles", bytes_of::<ScreenTriangle>(g.triangles));
@@ -996,11 +1002,15 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment, (lod, weight): (f32, f32)
     let v = &f.v;
     // Tangent frame, re-orthonormalized after interpolation (Lengyel Listing 7.8).
     let n = v.normal.try_normalize().unwrap_or(Vec3::Z);
-    let t_raw = v.tangent.truncate();
-    let t = (t_raw - n * n.dot(t_raw)).try_normalize().unwrap_or_else(|| n.any_orthonormal_vector());
-    let sign = if v.tangent.w < 0.0 { -1.0 } else { 1.0 };
-    let b = n.cross(t) * sign;
-    let tangent = Vec4::new(t.x, t.y, t.z, sign);
+    // `flat` reads none of the frame but the normal (no normal map, no ray in tangent space).
+    let (t, b, tangent) = if prep.technique == Technique::Flat {
+        (Vec3::ZERO, Vec3::ZERO, Vec4::ZERO)
+    } else {
+        let t_raw = v.tangent.truncate();
+        let t = (t_raw - n * n.dot(t_raw)).try_normalize().unwrap_or_else(|| n.any_orthonormal_vector());
+        let sign = if v.tangent.w < 0.0 { -1.0 } else { 1.0 };
+        (t, n.cross(t) * sign, Vec4::new(t.x, t.y, t.z, sign))
+    };
     let to_eye = (scene.camera.eye - v.world).try_normalize().unwrap_or(n);
     // World directions to tangent space, for the view ray and the shadow rays.
     let map =
