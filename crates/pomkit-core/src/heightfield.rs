@@ -60,6 +60,28 @@ impl EdgeMode {
     }
 }
 
+impl EdgeMode {
+    /// `(self.resolve(i, size), self.resolve(i.saturating_add(1), size))`, the coordinates of a
+    /// bilinear footprint's two columns (or rows), with one division at most.
+    #[inline]
+    #[must_use]
+    pub fn resolve_pair(self, i: i64, size: u32) -> (u32, u32) {
+        let a = self.resolve(i, size);
+        let b = match self {
+            // The wrapped neighbour of a wrapped coordinate: one step on, or back to 0.
+            EdgeMode::Wrap if i < i64::MAX => {
+                if a + 1 == size {
+                    0
+                } else {
+                    a + 1
+                }
+            }
+            _ => self.resolve(i.saturating_add(1), size),
+        };
+        (a, b)
+    }
+}
+
 /// `x.floor()` without a call into libm on targets without SSE4.1 (the baseline x86-64 this
 /// crate builds for), exact for every finite `x`.
 #[inline]
@@ -249,11 +271,15 @@ impl HeightField {
             let bottom = d01 + (d11 - d01) * fx;
             return top + (bottom - top) * fy;
         }
-        let (x1, y1) = (x0.saturating_add(1), y0.saturating_add(1));
-        let d00 = self.depth_at(x0, y0, edges);
-        let d10 = self.depth_at(x1, y0, edges);
-        let d01 = self.depth_at(x0, y1, edges);
-        let d11 = self.depth_at(x1, y1, edges);
+        // The texels depth_at would read at x0, x0 + 1 (saturating) and y0, y0 + 1, each
+        // coordinate resolved once.
+        let (xa, xb) = edges.resolve_pair(x0, self.width);
+        let (ya, yb) = edges.resolve_pair(y0, self.height);
+        let row = |y: u32| y as usize * self.width as usize;
+        let d00 = self.depth[row(ya) + xa as usize];
+        let d10 = self.depth[row(ya) + xb as usize];
+        let d01 = self.depth[row(yb) + xa as usize];
+        let d11 = self.depth[row(yb) + xb as usize];
         let top = d00 + (d10 - d00) * fx;
         let bottom = d01 + (d11 - d01) * fx;
         top + (bottom - top) * fy
@@ -414,6 +440,19 @@ mod tests {
 
     fn ramp(w: u32, h: u32) -> HeightField {
         HeightField::from_height_fn(w, h, |x, y| (x + 2 * y) as f32 / (w + 2 * h) as f32)
+    }
+
+    #[test]
+    fn resolve_pair_is_two_resolves() {
+        for edges in EdgeMode::ALL {
+            for size in [1u32, 2, 3, 7, 512] {
+                let far = [i64::MIN, i64::MIN + 1, -(1 << 40), i64::MAX - 1, i64::MAX];
+                for i in (-1100i64..1100).chain(far) {
+                    let want = (edges.resolve(i, size), edges.resolve(i.saturating_add(1), size));
+                    assert_eq!(edges.resolve_pair(i, size), want, "{edges:?} {i} {size}");
+                }
+            }
+        }
     }
 
     #[test]

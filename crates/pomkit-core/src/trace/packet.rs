@@ -140,8 +140,9 @@ fn bilinear<S: Simd>(simd: S, fields: &[&HeightField; LANES], u: f32x8<S>, v: f3
             c[3][i] = d[below + 1];
         } else {
             // The texels depth_at would read, each coordinate resolved once.
-            let (xa, xb) = resolve_pair(x, f.width(), edges);
-            let (ya, yb) = resolve_pair(y, f.height(), edges);
+            let (xa, xb) = edges.resolve_pair(x, f.width());
+            let (ya, yb) = edges.resolve_pair(y, f.height());
+            let (xa, xb, ya, yb) = (xa as usize, xb as usize, ya as usize, yb as usize);
             let (d, w) = (f.depths(), f.width() as usize);
             c[0][i] = d[ya * w + xa];
             c[1][i] = d[ya * w + xb];
@@ -153,25 +154,6 @@ fn bilinear<S: Simd>(simd: S, fields: &[&HeightField; LANES], u: f32x8<S>, v: f3
     let top = d00 + (d10 - d00) * fx;
     let bottom = d01 + (d11 - d01) * fx;
     top + (bottom - top) * fy
-}
-
-/// `(edges.resolve(i, size), edges.resolve(i + 1, size))` (the neighbour saturating, as
-/// [`HeightField::sample_bilinear`] forms it), as indices.
-#[inline(always)]
-fn resolve_pair(i: i64, size: u32, edges: EdgeMode) -> (usize, usize) {
-    let a = edges.resolve(i, size);
-    let b = match edges {
-        // The wrapped neighbour of a wrapped coordinate: one step on, or back to 0.
-        EdgeMode::Wrap if i < i64::MAX => {
-            if a + 1 == size {
-                0
-            } else {
-                a + 1
-            }
-        }
-        _ => edges.resolve(i.saturating_add(1), size),
-    };
-    (a as usize, b as usize)
 }
 
 /// [`line_intersection`] in every lane.
