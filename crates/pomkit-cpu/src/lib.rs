@@ -783,11 +783,13 @@ fn shade_tile(
     // visible ones are shaded at the end, in full packets.
     let mut visible: Vec<Option<(u32, Fragment)>> =
         if shading.visibility_first { vec![None; buf.len()] } else { Vec::new() };
+    // One packet for the tile, emptied after each triangle.
+    let mut packet = Packet::default();
     let mut draw = |tri: &ScreenTriangle, buf: &mut Vec<Option<Sample>>| {
         if shading.visibility_first {
             draw_visible(tri, (x0, y0, x1, y1), &mut visible);
         } else {
-            draw(scene, prepared, tri, (x0, y0, x1, y1), shading, buf);
+            draw(scene, prepared, tri, (x0, y0, x1, y1), shading, &mut packet, buf);
         }
     };
     let mut block = BlockVertices::default();
@@ -835,11 +837,11 @@ fn draw(
     tri: &ScreenTriangle,
     (x0, y0, x1, y1): (u32, u32, u32, u32),
     shading: Shading,
+    packet: &mut Packet,
     buf: &mut [Option<Sample>],
 ) {
     let tw = x1 - x0;
     let prep = &prepared[scene.objects[tri.object as usize].material];
-    let mut packet = Packet::default();
     tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
         let at = ((f.y - y0) * tw + (f.x - x0)) as usize;
         // Early depth test with the polygon's depth: the displaced depth is never nearer, so a
@@ -1177,7 +1179,7 @@ fn shade_packet<S: Simd>(
     // Every light's shadow rays, a packet per light; the hard and soft ones marched together.
     let m = &prep.material;
     shadows.clear();
-    for light in scene.lights.iter().filter(|_| surface.is_some()) {
+    for light in scene.lights.iter() {
         let Some(surface) = surface else { break };
         let mut done = [None; LANES];
         let mut marches = [None; LANES];
@@ -1246,14 +1248,12 @@ fn finish_packet<S: Simd>(
     let hit_uv: [Vec2; LANES] = std::array::from_fn(|i| texture_uv(lane(i).hit_uv, edges));
     let (full, vis, shadow_fetches) = shade8::lit(simd, scene, prep, &inputs, &hit_uv, with_shadows);
     // The LOD fade's normal-mapped fallback, where it differs from the full result.
-    let simple: [bool; LANES] = std::array::from_fn(|i| {
-        weight[i] < 1.0 && prep.lod_basis.is_some() && (with_shadows[i] || lane(i).hit_uv != frag(i).v.uv)
-    });
+    let simple: [bool; LANES] = std::array::from_fn(|i| fades(prep, &lane(i), frag(i), with_shadows[i]));
     let color = if simple.contains(&true) {
         let uv: [Vec2; LANES] = std::array::from_fn(|i| texture_uv(frag(i).v.uv, edges));
         let (plain, _, _) = shade8::lit(simd, scene, prep, &inputs, &uv, [false; LANES]);
-        let faded = plain.lerp(full, shade8::vec8(simd, weight));
-        shade8::V3::select(shade8::mask8(simd, simple), faded, full)
+        let faded = plain.lerp(full, packet::vec(simd, weight));
+        shade8::V3::select(packet::mask(simd, simple), faded, full)
     } else {
         full
     };
@@ -1294,6 +1294,13 @@ fn shadow_ray(prep: &Prepared, lane: &Lane, f: &Fragment, light: &Light) -> Opti
     // The map takes a direction of travel; toward the light it is the same map.
     (traced && prep.material.shadow.mode != ShadowMode::None && prep.surface.is_some())
         .then(|| lane.map.map_or(Vec3::ZERO, |m| m.apply(l)))
+}
+
+/// Whether the fragment blends the full result with the LOD fade's normal-mapped fallback: below
+/// full weight on a height map, unless the fallback is the same lighting at the same point
+/// (no shadows, no offset), where `a.lerp(a, w)` would only round `a`.
+fn fades(prep: &Prepared, lane: &Lane, f: &Fragment, with_shadows: bool) -> bool {
+    lane.weight < 1.0 && prep.lod_basis.is_some() && (with_shadows || lane.hit_uv != f.v.uv)
 }
 
 /// The fragment's depth: the polygon's, or with a pixel depth offset the traced point's along
@@ -1376,10 +1383,7 @@ fn finish(
     let weight = lane.weight;
     let with_shadows = shadows_cast(prep) && weight > 0.0;
     let (full, vis) = lit(lane.hit_uv, with_shadows, &mut fetches);
-    let color = if weight >= 1.0 || prep.lod_basis.is_none() {
-        full
-    } else if !with_shadows && lane.hit_uv == v.uv {
-        // The normal-mapped fallback is the same lighting at the same point: a.lerp(a, w) is a.
+    let color = if !fades(prep, lane, f, with_shadows) {
         full
     } else {
         let (simple, _) = lit(v.uv, false, &mut fetches);

@@ -12,7 +12,7 @@ use pomkit_core::EdgeMode;
 use pomkit_core::heightfield::floor;
 use pomkit_core::scene::{Light, Texture};
 use pomkit_core::shadow::Shadow;
-use pomkit_core::trace::packet::LANES;
+use pomkit_core::trace::packet::{LANES, finite, mask as mask8, vec as vec8};
 
 /// Eight 3-vectors, one per lane.
 #[derive(Clone, Copy)]
@@ -20,16 +20,6 @@ pub(crate) struct V3<S: Simd> {
     pub x: f32x8<S>,
     pub y: f32x8<S>,
     pub z: f32x8<S>,
-}
-
-#[inline(always)]
-pub(crate) fn vec8<S: Simd>(simd: S, a: [f32; LANES]) -> f32x8<S> {
-    f32x8::from_slice(simd, &a)
-}
-
-#[inline(always)]
-pub(crate) fn mask8<S: Simd>(simd: S, b: [bool; LANES]) -> mask32x8<S> {
-    mask32x8::from_slice(simd, &b.map(|x| if x { -1 } else { 0 }))
 }
 
 impl<S: Simd> V3<S> {
@@ -88,7 +78,7 @@ impl<S: Simd> V3<S> {
     pub fn normalize_or(self, fallback: Self) -> Self {
         let simd = self.x.witness();
         let rcp = simd.splat_f32x8(1.0) / self.dot(self).sqrt();
-        let ok = rcp.abs().simd_lt(f32::INFINITY) & rcp.simd_gt(0.0);
+        let ok = finite(rcp) & rcp.simd_gt(0.0);
         Self::select(ok, self.scale(rcp), fallback)
     }
 }
@@ -111,7 +101,7 @@ fn bilinear<S: Simd>(
     let h = vec8(simd, size.map(|s| s.1 as f32));
     let tx = u * w - 0.5;
     let ty = v * h - 0.5;
-    let ok = tx.abs().simd_lt(f32::INFINITY) & ty.abs().simd_lt(f32::INFINITY);
+    let ok = finite(tx) & finite(ty);
     let zero = simd.splat_f32x8(0.0);
     let (tx, ty) = (ok.select(tx, zero), ok.select(ty, zero));
     let (x0, y0) = (tx.floor(), ty.floor());

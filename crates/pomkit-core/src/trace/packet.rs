@@ -30,7 +30,7 @@ pub const LANES: usize = 8;
 
 /// Eight booleans as a lane mask.
 #[inline(always)]
-fn mask<S: Simd>(simd: S, b: [bool; LANES]) -> mask32x8<S> {
+pub fn mask<S: Simd>(simd: S, b: [bool; LANES]) -> mask32x8<S> {
     mask32x8::from_slice(simd, &b.map(|x| if x { -1 } else { 0 }))
 }
 
@@ -41,8 +41,9 @@ fn bools<S: Simd>(m: mask32x8<S>) -> [bool; LANES] {
     a.map(|x| x != 0)
 }
 
+/// Eight floats as a vector.
 #[inline(always)]
-fn vec<S: Simd>(simd: S, a: [f32; LANES]) -> f32x8<S> {
+pub fn vec<S: Simd>(simd: S, a: [f32; LANES]) -> f32x8<S> {
     f32x8::from_slice(simd, &a)
 }
 
@@ -58,7 +59,7 @@ fn array<S: Simd>(v: f32x8<S>) -> [f32; LANES] {
 
 /// Whether each lane is finite (neither infinite nor NaN).
 #[inline(always)]
-fn finite<S: Simd>(x: f32x8<S>) -> mask32x8<S> {
+pub fn finite<S: Simd>(x: f32x8<S>) -> mask32x8<S> {
     x.abs().simd_lt(f32::INFINITY)
 }
 
