@@ -342,13 +342,18 @@ fn report_gpu(gpu: &GpuRenderer, what: &str) -> pomkit_gpu::Timings {
 }
 
 /// Times `runs` CPU frames of `opts` after a warm-up with the AOVs on (which gives the fetches).
+/// One renderer draws them all, as one GPU renderer draws the GPU's: it keeps the albedo mip
+/// chains from frame to frame (the GPU keeps its uploaded textures), while everything made
+/// from the height maps is made again in every frame on both.
 fn cpu_frames(scene: &Scene, opts: &RenderOptions, name: &str, runs: u32) -> Result<CpuStats> {
-    let warm = frame(scene, &RenderOptions { aovs: true, ..*opts }, &format!("{name}: warm-up with AOVs"))?;
+    let mut renderer = CpuRenderer::new();
+    let warm =
+        frame(&mut renderer, scene, &RenderOptions { aovs: true, ..*opts }, &format!("{name}: warm-up with AOVs"))?;
     let fetches = fetches_per_covered_pixel(&warm.out);
     let mut times = Vec::new();
     let mut setups = Vec::new();
     for i in 0..runs {
-        let f = frame(scene, opts, &format!("{name}: run {}/{runs}", i + 1))?;
+        let f = frame(&mut renderer, scene, opts, &format!("{name}: run {}/{runs}", i + 1))?;
         times.push(f.time);
         setups.push(f.setup);
     }
@@ -371,11 +376,10 @@ struct Frame {
 }
 
 /// Renders one frame, timing the whole render call, and reports it on standard error.
-fn frame(scene: &Scene, opts: &RenderOptions, what: &str) -> Result<Frame> {
+fn frame(renderer: &mut CpuRenderer, scene: &Scene, opts: &RenderOptions, what: &str) -> Result<Frame> {
     let pixels = u64::from(opts.width) * u64::from(opts.height);
     let pb = progress::items(pixels.div_ceil(32 * 32), 64, what, "tiles");
     let first_tile = OnceLock::new();
-    let mut renderer = CpuRenderer::new();
     let start = Instant::now();
     let out = renderer
         .render(scene, opts, &|done, _total| {

@@ -268,6 +268,21 @@ pub fn resolve_rows(
     let n = (ss * ss) as f32;
     let h = color.len() / w.max(1);
     let mut covered = 0;
+    if ss == 1 && aovs.is_none() {
+        // One sample per pixel: the sum below of its colour or the background, `0 + c`, and
+        // `/ 1` leaves it as it is.
+        let background = Vec3::ZERO + background;
+        for (c, s) in color.iter_mut().zip(samples) {
+            *c = match s {
+                Some(s) => {
+                    covered += 1;
+                    Vec3::ZERO + if s.color.is_finite() { s.color } else { Vec3::ZERO }
+                }
+                None => background,
+            };
+        }
+        return covered;
+    }
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;

@@ -842,31 +842,42 @@ fn draw(
 ) {
     let tw = x1 - x0;
     let prep = &prepared[scene.objects[tri.object as usize].material];
-    tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
-        let at = ((f.y - y0) * tw + (f.x - x0)) as usize;
+    let at = |x: u32, y: u32| ((y - y0) * tw + (x - x0)) as usize;
+    // The fragments a packet holds, written when it is shaded: the early depth test reads the
+    // buffer as it was before them.
+    let buf = std::cell::RefCell::new(buf);
+    tri.rasterize_tested(
+        x0,
+        y0,
+        x1,
+        y1,
         // Early depth test with the polygon's depth: the displaced depth is never nearer, so a
         // fragment behind the stored one stays behind. The fragments of one triangle cover
         // distinct samples, so the test may run before the packet's earlier fragments land.
-        if buf[at].is_some_and(|s| s.z <= f.z) {
-            return;
-        }
-        if packet.push(*f, at) {
-            packet.shade_into(scene, prep, shading, buf);
-        }
-    });
-    packet.shade_into(scene, prep, shading, buf);
+        |x, y, z| !buf.borrow()[at(x, y)].is_some_and(|s| s.z <= z),
+        |f: &Fragment| {
+            if packet.push(*f, at(f.x, f.y)) {
+                packet.shade_into(scene, prep, shading, &mut buf.borrow_mut());
+            }
+        },
+    );
+    packet.shade_into(scene, prep, shading, &mut buf.into_inner());
 }
 
 /// Rasterizes `tri` into the tile `[x0, x1) x [y0, y1)` for a visibility pass: `visible` keeps
 /// each sample's nearest fragment (the first drawn among equals) and its object, unshaded.
 fn draw_visible(tri: &ScreenTriangle, (x0, y0, x1, y1): (u32, u32, u32, u32), visible: &mut [Option<(u32, Fragment)>]) {
     let tw = x1 - x0;
-    tri.rasterize(x0, y0, x1, y1, |f: &Fragment| {
-        let slot = &mut visible[((f.y - y0) * tw + (f.x - x0)) as usize];
-        if slot.is_none_or(|(_, v)| f.z < v.z) {
-            *slot = Some((tri.object, *f));
-        }
-    });
+    let at = |x: u32, y: u32| ((y - y0) * tw + (x - x0)) as usize;
+    let visible = std::cell::RefCell::new(visible);
+    tri.rasterize_tested(
+        x0,
+        y0,
+        x1,
+        y1,
+        |x, y, z| visible.borrow()[at(x, y)].is_none_or(|(_, v)| z < v.z),
+        |f: &Fragment| visible.borrow_mut()[at(f.x, f.y)] = Some((tri.object, *f)),
+    );
 }
 
 /// Shades the visible fragments of a tile `tw` samples wide ([`draw_visible`]) into `buf`,
@@ -890,8 +901,8 @@ fn shade_visible(
                     continue;
                 }
                 let at = (y * tw + x) as usize;
-                let Some((object, f)) = visible[at] else { continue };
-                let material = scene.objects[object as usize].material;
+                let Some((object, f)) = &visible[at] else { continue };
+                let material = scene.objects[*object as usize].material;
                 let i = match open.iter().position(|(m, _)| *m == material) {
                     Some(i) => i,
                     None => {
@@ -900,7 +911,7 @@ fn shade_visible(
                     }
                 };
                 let (m, packet) = &mut open[i];
-                if packet.push(f, at) {
+                if packet.push(*f, at) {
                     packet.shade_into(scene, &prepared[*m], shading, buf);
                 }
             }
@@ -978,7 +989,7 @@ struct Shading {
 
 /// A fragment's state between the stages of [`shade`]: its tangent frame, view ray and level of
 /// detail, and where its ray met the relief.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct Lane {
     n: Vec3,
     t: Vec3,
@@ -1000,10 +1011,22 @@ struct Lane {
 
 /// The fragment stage up to the trace: the tangent frame, the eye direction, the mip level and
 /// the view ray.
-fn begin(scene: &Scene, prep: &Prepared, f: &Fragment, (lod, weight): (f32, f32)) -> Lane {
+fn begin(scene: &Scene, prep: &Prepared, f: &Fragment, levels: (f32, f32)) -> Lane {
+    let n = f.v.normal.try_normalize().unwrap_or(Vec3::Z);
+    let to_eye = (scene.camera.eye - f.v.world).try_normalize().unwrap_or(n);
+    let mut lane = Lane::default();
+    begin_into(&mut lane, prep, f, levels, n, to_eye);
+    lane
+}
+
+/// [`begin`] into `lane`, from the fragment's unit normal `n` and eye direction `to_eye` (which
+/// a packet computes for all its lanes at once, [`shade_packet`]). It writes the lane field by
+/// field, where a packet keeps it: a whole `Lane` built aside and copied in cost a store
+/// forwarding stall per lane.
+#[inline(always)]
+fn begin_into(lane: &mut Lane, prep: &Prepared, f: &Fragment, (lod, weight): (f32, f32), n: Vec3, to_eye: Vec3) {
     let v = &f.v;
     // Tangent frame, re-orthonormalized after interpolation (Lengyel Listing 7.8).
-    let n = v.normal.try_normalize().unwrap_or(Vec3::Z);
     // `flat` reads none of the frame but the normal (no normal map, no ray in tangent space).
     let (t, b, tangent) = if prep.technique == Technique::Flat {
         (Vec3::ZERO, Vec3::ZERO, Vec4::ZERO)
@@ -1013,29 +1036,25 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment, (lod, weight): (f32, f32)
         let sign = if v.tangent.w < 0.0 { -1.0 } else { 1.0 };
         (t, n.cross(t) * sign, Vec4::new(t.x, t.y, t.z, sign))
     };
-    let to_eye = (scene.camera.eye - v.world).try_normalize().unwrap_or(n);
     // World directions to tangent space, for the view ray and the shadow rays.
     let map =
         if prep.technique.displaces() || shadows_cast(prep) { TangentMap::new(n, tangent, v.uv_scale) } else { None };
-    let dir = match map {
+    lane.dir = match map {
         Some(m) if prep.technique.displaces() => m.apply(-to_eye),
         _ => Vec3::ZERO,
     };
-    let mut lane = Lane {
-        map,
-        n,
-        t,
-        b,
-        tangent,
-        to_eye,
-        lod,
-        weight,
-        dir,
-        hit_uv: v.uv,
-        hit_depth: v.depth,
-        ray_depth: v.depth,
-        fetches: 0,
-    };
+    lane.map = map;
+    lane.n = n;
+    lane.t = t;
+    lane.b = b;
+    lane.tangent = tangent;
+    lane.to_eye = to_eye;
+    lane.lod = lod;
+    lane.weight = weight;
+    lane.hit_uv = v.uv;
+    lane.hit_depth = v.depth;
+    lane.ray_depth = v.depth;
+    lane.fetches = 0;
     if v.depth > 0.0
         && let Some(surface) = &prep.surface
     {
@@ -1045,7 +1064,6 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment, (lod, weight): (f32, f32)
         lane.hit_depth = lane.hit_depth.min(surface.depth(v.uv, 0.0));
         lane.fetches += 1;
     }
-    lane
 }
 
 /// The mip level of the height map from the quad's UV gradients (fixed before any loop), and
@@ -1154,24 +1172,31 @@ fn shade_packet<S: Simd>(
         return;
     }
     let surface = prep.surface.as_deref();
-    let mut lanes: [Option<Lane>; LANES] = [None; LANES];
+    let mut lanes = [Lane::default(); LANES];
     let mut rays = [None; LANES];
     let mut lods = [0.0; LANES];
     let levels = per_quad(frags, |f| level_of(prep, f));
+    // `begin`'s normalizations, for all lanes at once (the same operations as glam's).
+    let frag = |i: usize| frags.get(i).unwrap_or(&frags[0]);
+    let normals = shade8::V3::from_lanes(simd, &std::array::from_fn(|i| frag(i).v.normal))
+        .normalize_or(shade8::V3::splat(simd, Vec3::Z));
+    let worlds = shade8::V3::from_lanes(simd, &std::array::from_fn(|i| frag(i).v.world));
+    let to_eye = shade8::V3::splat(simd, scene.camera.eye).sub(worlds).normalize_or(normals);
+    let (normals, to_eye) = (normals.lanes(), to_eye.lanes());
     for (i, f) in frags.iter().enumerate() {
-        let lane = begin(scene, prep, f, levels[i]);
-        if traces(prep, &lane) {
+        let lane = &mut lanes[i];
+        begin_into(lane, prep, f, levels[i], normals[i], to_eye[i]);
+        if traces(prep, lane) {
             rays[i] = Some(Ray::new(f.v.uv, lane.dir));
         }
         lods[i] = lane.lod;
-        lanes[i] = Some(lane);
     }
     if let Some(surface) = surface
         && rays.iter().any(Option::is_some)
     {
         let hits = packet::trace_packet(simd, surface, &rays, prep.technique, &prep.params, lods);
         for (lane, hit) in lanes.iter_mut().zip(&hits) {
-            if let (Some(lane), Some(hit)) = (lane, hit) {
+            if let Some(hit) = hit {
                 take_hit(prep, surface, lane, hit);
             }
         }
@@ -1184,7 +1209,6 @@ fn shade_packet<S: Simd>(
         let mut done = [None; LANES];
         let mut marches = [None; LANES];
         for (i, (lane, f)) in lanes.iter().zip(frags).enumerate() {
-            let Some(lane) = lane else { continue };
             let Some(lt) = shadow_ray(prep, lane, f, light) else { continue };
             let p = TraceParams { lod: lane.lod, ..prep.params };
             match shadow_start(surface, lane.hit_uv, lane.hit_depth, lt, &m.shadow, &p) {
@@ -1214,7 +1238,7 @@ fn texture_uv(uv: Vec2, edges: EdgeMode) -> Vec2 {
     }
 }
 
-/// [`finish`] for a packet of fragments (`lanes[i]` set for every `frags[i]`), with the
+/// [`finish`] for a packet of fragments (`lanes[i]` begun for every `frags[i]`), with the
 /// shadows already traced (`shadows[light][lane]`): the texture filtering and lighting run on
 /// all lanes at once ([`shade8`]), the pixel depth offset lane by lane.
 #[expect(clippy::too_many_arguments, reason = "a packet's fragments, their state and the frame")]
@@ -1225,20 +1249,23 @@ fn finish_packet<S: Simd>(
     prep: &Prepared,
     shading: &Shading,
     frags: &[Fragment],
-    lanes: &[Option<Lane>; LANES],
+    lanes: &[Lane; LANES],
     shadows: &[[Option<Shadow>; LANES]],
     out: &mut [Option<Sample>; LANES],
 ) {
-    let Some(first) = lanes[0] else { return };
-    let lane = |i: usize| lanes[i].unwrap_or(first);
+    if frags.is_empty() {
+        return;
+    }
+    // Lanes past the packet's fragments repeat the first (their results are not used).
+    let lane = |i: usize| -> &Lane { if i < frags.len() { &lanes[i] } else { &lanes[0] } };
     let frag = |i: usize| frags.get(i).unwrap_or(&frags[0]);
-    let pick = |g: &dyn Fn(&Lane) -> Vec3| -> [Vec3; LANES] { std::array::from_fn(|i| g(&lane(i))) };
+    let pick = |g: fn(&Lane) -> Vec3| shade8::V3::from_lanes(simd, &std::array::from_fn(|i| g(lane(i))));
     let edges = prep.edges;
     let inputs = shade8::LitInputs {
-        n: shade8::V3::from_lanes(simd, &pick(&|l| l.n)),
-        t: shade8::V3::from_lanes(simd, &pick(&|l| l.t)),
-        b: shade8::V3::from_lanes(simd, &pick(&|l| l.b)),
-        to_eye: shade8::V3::from_lanes(simd, &pick(&|l| l.to_eye)),
+        n: pick(|l| l.n),
+        t: pick(|l| l.t),
+        b: pick(|l| l.b),
+        to_eye: pick(|l| l.to_eye),
         world: std::array::from_fn(|i| frag(i).v.world),
         albedo_lods: per_quad(frags, |f| albedo_level(&prep.albedo, f.duv_dx, f.duv_dy)),
         shadows,
@@ -1248,7 +1275,7 @@ fn finish_packet<S: Simd>(
     let hit_uv: [Vec2; LANES] = std::array::from_fn(|i| texture_uv(lane(i).hit_uv, edges));
     let (full, vis, shadow_fetches) = shade8::lit(simd, scene, prep, &inputs, &hit_uv, with_shadows);
     // The LOD fade's normal-mapped fallback, where it differs from the full result.
-    let simple: [bool; LANES] = std::array::from_fn(|i| fades(prep, &lane(i), frag(i), with_shadows[i]));
+    let simple: [bool; LANES] = std::array::from_fn(|i| fades(prep, lane(i), frag(i), with_shadows[i]));
     let color = if simple.contains(&true) {
         let uv: [Vec2; LANES] = std::array::from_fn(|i| texture_uv(frag(i).v.uv, edges));
         let (plain, _, _) = shade8::lit(simd, scene, prep, &inputs, &uv, [false; LANES]);
@@ -1262,7 +1289,7 @@ fn finish_packet<S: Simd>(
         let l = lane(i);
         out[i] = Some(Sample {
             color: color[i],
-            z: depth_offset(prep, shading, f, &l),
+            z: depth_offset(prep, shading, f, l),
             uv: l.hit_uv,
             depth: l.hit_depth,
             shadow: vis[i],

@@ -81,8 +81,9 @@ pub struct ScreenTriangle {
     pub object: u32,
     /// Screen positions snapped to 1/256 pixel.
     fixed: [[i64; 2]; 3],
-    /// Twice the signed area in squared 1/256 pixels (positive after setup).
-    area2: i128,
+    /// Twice the signed area in squared 1/256 pixels (positive after setup), as `f64` (the
+    /// barycentric weights' divisor).
+    area: f64,
     /// Every fixed-point coordinate below 2^29 in magnitude: the edge functions at points as
     /// small fit in i64 (differences below 2^30, products below 2^60).
     small: bool,
@@ -225,7 +226,7 @@ pub fn setup(tri: &[ClipVertex; 3], width: u32, height: u32, object: u32, cull: 
     }
     let min_z = z[0].min(z[1]).min(z[2]);
     let small = fixed.iter().flatten().all(|c| c.abs() < SMALL);
-    Some(ScreenTriangle { p, z, inv_w, v, object, fixed, area2, small, min_z })
+    Some(ScreenTriangle { p, z, inv_w, v, object, fixed, area: area2 as f64, small, min_z })
 }
 
 /// The bound below which fixed-point coordinates take the i64 edge functions.
@@ -277,17 +278,6 @@ impl ScreenTriangle {
         }
     }
 
-    /// Barycentric weights (not perspective corrected) from the edge functions, and whether the
-    /// point is covered under the top-left rule.
-    #[inline]
-    fn weights(&self, [w0, w1, w2]: [i128; 3]) -> (Vec3, bool) {
-        let [a, b, c] = self.fixed;
-        let covered = edge_ok(w0, b, c) && edge_ok(w1, c, a) && edge_ok(w2, a, b);
-        let area = self.area2 as f64;
-        let bary = Vec3::new((w0 as f64 / area) as f32, (w1 as f64 / area) as f32, (w2 as f64 / area) as f32);
-        (bary, covered)
-    }
-
     /// Whether edge functions `w` put their point inside (top-left rule).
     #[inline]
     fn covered_by(&self, [w0, w1, w2]: [i128; 3]) -> bool {
@@ -315,13 +305,23 @@ impl ScreenTriangle {
     }
 
     /// Perspective-correct varyings and depth at the point of edge functions `w`.
+    #[cfg(test)]
     fn interpolate_edges(&self, w: [i128; 3]) -> (Varyings, f32, bool) {
-        let (b, covered) = self.weights(w);
+        let (pc, z) = self.weights_at(w.map(|v| v as f64));
+        (Varyings::lerp3(&self.v[0], &self.v[1], &self.v[2], pc), z, self.covered_by(w))
+    }
+
+    /// The perspective-correct barycentric weights and the depth at the point of edge
+    /// functions `w` (exact integers, as `f64`).
+    #[inline]
+    fn weights_at(&self, w: [f64; 3]) -> (Vec3, f32) {
+        let area = self.area;
+        let b = Vec3::new((w[0] / area) as f32, (w[1] / area) as f32, (w[2] / area) as f32);
         let z = b.x * self.z[0] + b.y * self.z[1] + b.z * self.z[2];
         let pw = Vec3::new(b.x * self.inv_w[0], b.y * self.inv_w[1], b.z * self.inv_w[2]);
         let sum = pw.x + pw.y + pw.z;
         let pc = if sum.abs() > 1e-30 { pw / sum } else { b };
-        (Varyings::lerp3(&self.v[0], &self.v[1], &self.v[2], pc), z, covered)
+        (pc, z)
     }
 
     /// Pixel bounding box clamped to `[x0, x1) x [y0, y1)`, expanded to even coordinates so
@@ -341,55 +341,154 @@ impl ScreenTriangle {
 
     /// Rasterizes the part of the triangle inside `[x0, x1) x [y0, y1)` (x0, y0 even) in 2x2
     /// quads, calling `shade` for each covered pixel with derivatives from its quad.
-    pub fn rasterize(&self, x0: u32, y0: u32, x1: u32, y1: u32, mut shade: impl FnMut(&Fragment)) {
+    pub fn rasterize(&self, x0: u32, y0: u32, x1: u32, y1: u32, shade: impl FnMut(&Fragment)) {
+        self.rasterize_tested(x0, y0, x1, y1, |_, _, _| true, shade);
+    }
+
+    /// [`ScreenTriangle::rasterize`] with a depth test before the interpolation: `keep(x, y, z)`
+    /// decides from a covered pixel's position and depth whether it is shaded, and only the
+    /// pixels it keeps get their varyings interpolated (the quad's other pixels, helpers for
+    /// the derivatives, get their UV only). The fragments are the ones `rasterize` gives, bit
+    /// for bit.
+    pub fn rasterize_tested(
+        &self,
+        x0: u32,
+        y0: u32,
+        x1: u32,
+        y1: u32,
+        mut keep: impl FnMut(u32, u32, f32) -> bool,
+        mut shade: impl FnMut(&Fragment),
+    ) {
         let Some((bx0, by0, bx1, by1)) = self.quad_bounds(x0, y0, x1, y1) else { return };
-        let mut qy = by0 & !1;
+        let inside = |x: u32, y: u32| x >= x0 && x < x1 && y >= y0 && y < y1;
+        let (qx0, qy0) = (bx0 & !1, by0 & !1);
+        if self.small {
+            // The edge functions stepped from pixel to pixel, exactly (in i64: the values at
+            // pixel centres stay below 2^60, module docs of `SMALL`), and the top-left rule as
+            // a least value: covered where every edge function is at least `least`.
+            let [a, b, c] = self.fixed;
+            let o = Self::centre(qx0, qy0);
+            let mut row = [0i64; 3];
+            let mut step_x = [0i64; 3];
+            let mut step_y = [0i64; 3];
+            let mut least = [0i64; 3];
+            for (k, (p, q)) in [(b, c), (c, a), (a, b)].into_iter().enumerate() {
+                let d = [q[0] - p[0], q[1] - p[1]];
+                row[k] = d[0] * (o[1] - p[1]) - d[1] * (o[0] - p[0]);
+                step_x[k] = -d[1] * 256;
+                step_y[k] = d[0] * 256;
+                least[k] = i64::from(!top_left(p, q));
+            }
+            let mut qy = qy0;
+            while qy < by1 {
+                let mut e = row;
+                let mut qx = qx0;
+                while qx < bx1 {
+                    let mut w = [[0i64; 3]; 4];
+                    let mut mask = 0u32;
+                    for (k, wk) in w.iter_mut().enumerate() {
+                        let (dx, dy) = ((k & 1) as i64, (k >> 1) as i64);
+                        let mut all = true;
+                        for i in 0..3 {
+                            wk[i] = e[i] + dx * step_x[i] + dy * step_y[i];
+                            all &= wk[i] >= least[i];
+                        }
+                        mask |= u32::from(all) << k;
+                    }
+                    if mask != 0 {
+                        let w = w.map(|wk| wk.map(|v| v as f64));
+                        self.emit_quad(qx, qy, mask, &w, inside, &mut keep, &mut shade);
+                    }
+                    for i in 0..3 {
+                        e[i] += 2 * step_x[i];
+                    }
+                    qx += 2;
+                }
+                for i in 0..3 {
+                    row[i] += 2 * step_y[i];
+                }
+                qy += 2;
+            }
+            return;
+        }
+        let mut qy = qy0;
         while qy < by1 {
-            let mut qx = bx0 & !1;
+            let mut qx = qx0;
             while qx < bx1 {
                 // Coverage first (exact integers only): a quad the triangle misses costs no
                 // interpolation.
-                let mut covered = [false; 4];
-                let mut edges = [[0i128; 3]; 4];
-                for (k, c) in covered.iter_mut().enumerate() {
+                let mut mask = 0u32;
+                let mut w = [[0f64; 3]; 4];
+                for (k, wk) in w.iter_mut().enumerate() {
                     let (x, y) = (qx + (k & 1) as u32, qy + (k >> 1) as u32);
-                    edges[k] = self.edges_at(Self::centre(x, y));
-                    *c = x >= x0 && x < x1 && y >= y0 && y < y1 && self.covered_by(edges[k]);
+                    let e = self.edges_at(Self::centre(x, y));
+                    *wk = e.map(|v| v as f64);
+                    mask |= u32::from(self.covered_by(e)) << k;
                 }
-                if covered.iter().any(|&c| c) {
-                    let mut px = [(Varyings::default(), 0.0f32, false); 4];
-                    for (k, slot) in px.iter_mut().enumerate() {
-                        *slot = self.interpolate_edges(edges[k]);
-                        slot.2 = covered[k];
-                    }
-                    // Coarse derivatives, as a GPU's ddx/ddy: differences across the quad.
-                    let duv_dx = 0.5 * ((px[1].0.uv - px[0].0.uv) + (px[3].0.uv - px[2].0.uv));
-                    let duv_dy = 0.5 * ((px[2].0.uv - px[0].0.uv) + (px[3].0.uv - px[1].0.uv));
-                    for (k, (v, z, covered)) in px.iter().enumerate() {
-                        if *covered {
-                            let (dx, dy) = ((k & 1) as u32, (k >> 1) as u32);
-                            shade(&Fragment { x: qx + dx, y: qy + dy, z: *z, v: *v, duv_dx, duv_dy });
-                        }
-                    }
+                if mask != 0 {
+                    self.emit_quad(qx, qy, mask, &w, inside, &mut keep, &mut shade);
                 }
                 qx += 2;
             }
             qy += 2;
         }
     }
+
+    /// The fragments of the quad at `(qx, qy)` whose pixels `mask` covers (bit `k` for pixel
+    /// `(qx + k % 2, qy + k / 2)`) and `inside` and `keep` accept, from the quad's edge functions
+    /// `w` (as `f64`, exactly).
+    #[expect(clippy::too_many_arguments, reason = "a quad, its coverage and the two stages")]
+    #[inline(always)]
+    fn emit_quad(
+        &self,
+        qx: u32,
+        qy: u32,
+        mask: u32,
+        w: &[[f64; 3]; 4],
+        inside: impl Fn(u32, u32) -> bool,
+        keep: &mut impl FnMut(u32, u32, f32) -> bool,
+        shade: &mut impl FnMut(&Fragment),
+    ) {
+        let [va, vb, vc] = &self.v;
+        // Every pixel's perspective-correct weights and UV (the derivatives need all four), the
+        // depth of the covered ones.
+        let mut pc = [Vec3::ZERO; 4];
+        let mut uv = [Vec2::ZERO; 4];
+        let mut z = [0.0f32; 4];
+        for k in 0..4 {
+            let (b, zk) = self.weights_at(w[k]);
+            pc[k] = b;
+            z[k] = zk;
+            uv[k] = va.uv * b.x + vb.uv * b.y + vc.uv * b.z;
+        }
+        // Coarse derivatives, as a GPU's ddx/ddy: differences across the quad.
+        let duv_dx = 0.5 * ((uv[1] - uv[0]) + (uv[3] - uv[2]));
+        let duv_dy = 0.5 * ((uv[2] - uv[0]) + (uv[3] - uv[1]));
+        for k in 0..4 {
+            let (x, y) = (qx + (k & 1) as u32, qy + (k >> 1) as u32);
+            if mask & (1 << k) != 0 && inside(x, y) && keep(x, y, z[k]) {
+                let v = Varyings::lerp3(va, vb, vc, pc[k]);
+                shade(&Fragment { x, y, z: z[k], v, duv_dx, duv_dy });
+            }
+        }
+    }
+}
+
+/// Whether the edge from `a` to `b` is a top or a left edge, whose pixel centres exactly on it
+/// belong to the triangle.
+#[inline]
+fn top_left(a: [i64; 2], b: [i64; 2]) -> bool {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    // With positive area (counter-clockwise in y-down pixel space), top edges run toward -x
+    // horizontally and left edges run toward +y.
+    (d[1] == 0 && d[0] < 0) || d[1] > 0
 }
 
 /// Top-left rule: a pixel centre exactly on an edge belongs to the triangle only for top or
 /// left edges, so shared edges are drawn once.
 #[inline]
 fn edge_ok(w: i128, a: [i64; 2], b: [i64; 2]) -> bool {
-    if w != 0 {
-        return w > 0;
-    }
-    let d = [b[0] - a[0], b[1] - a[1]];
-    // With positive area (counter-clockwise in y-down pixel space), top edges run toward -x
-    // horizontally and left edges run toward +y.
-    (d[1] == 0 && d[0] < 0) || d[1] > 0
+    if w != 0 { w > 0 } else { top_left(a, b) }
 }
 
 #[cfg(test)]

@@ -45,6 +45,11 @@ impl<S: Simd> V3<S> {
     }
 
     #[inline(always)]
+    pub fn sub(self, o: Self) -> Self {
+        Self { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
+    }
+
+    #[inline(always)]
     pub fn mul(self, o: Self) -> Self {
         Self { x: self.x * o.x, y: self.y * o.y, z: self.z * o.z }
     }
