@@ -51,7 +51,7 @@ pub use pomkit_core::render::{
     Aovs, Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve, resolve_rows, validate,
 };
 
-use raster::{ClipVertex, Fragment, ScreenTriangle, Varyings, clip_near, needs_clipping, setup};
+use raster::{ClipVertex, Fragment, Needs, ScreenTriangle, Varyings, clip_near, needs_clipping, setup};
 pub use simd::{SIMD_ENV, Simd8, SimdEnvError, cpu_features};
 
 /// A material prepared for shading: surfaces, mip chains, normal maps.
@@ -106,6 +106,14 @@ impl Default for CpuRenderer {
 }
 
 const TILE: u32 = 32;
+
+/// The width in samples of a frame's tiles (all [`TILE`] rows high): [`TILE`], or with
+/// [`Stream`]s (the displaced reference) the whole row of the frame. A streamed block is made in
+/// every tile it touches; a tile as wide as the frame makes each block once per band of rows it
+/// crosses instead of once per tile (about half as often for the demo).
+fn tile_width(sw: u32, streams: bool) -> u32 {
+    if streams { sw.max(1) } else { TILE }
+}
 
 impl CpuRenderer {
     /// A renderer shading with the best SIMD level of this CPU, or the one `POMKIT_SIMD` asks
@@ -245,11 +253,12 @@ impl CpuRenderer {
                     }
                 })
                 .collect();
+            let needs = Needs { frame: prep.technique != Technique::Flat, curvature: silhouettes(prep) };
             for tri in world.indices.chunks_exact(3) {
                 let t = [verts[tri[0] as usize], verts[tri[1] as usize], verts[tri[2] as usize]];
                 for c in clip_near(t) {
                     if let Some(st) = setup(&c, sw, sh, oi as u32, true) {
-                        out.push(st);
+                        out.push(st.needing(needs));
                     }
                 }
             }
@@ -485,13 +494,20 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
         threads.saturating_mul(2).saturating_mul(band).min(2 * bytes_of::<Option<Sample>>(w * h * ss * ss)),
     );
     // Each tile being shaded: its samples, and with visibility first its nearest fragments.
-    let tile = u64::from(TILE) * u64::from(TILE);
+    let streams = scene
+        .objects
+        .iter()
+        .any(|o| opts.mode == Mode::Displaced && scene.materials.get(o.material).is_some_and(|m| m.height.is_some()));
+    let tile_w = u64::from(tile_width(opts.width.saturating_mul(opts.supersample.clamp(1, 8)), streams));
+    let tile = tile_w * u64::from(TILE);
     e.add(
         "tiles in flight",
-        threads.saturating_mul(tile * (bytes_of::<Option<Sample>>(1) + bytes_of::<Option<(u32, Fragment)>>(1))),
+        threads.saturating_mul(
+            tile * (bytes_of::<Option<Sample>>(1) + bytes_of::<(u32, f32)>(1) + bytes_of::<Fragment>(1)),
+        ),
     );
     let g = geometry_counts(scene, opts);
-    let tiles = (w * ss).div_ceil(u64::from(TILE)) * (h * ss).div_ceil(u64::from(TILE));
+    let tiles = (w * ss).div_ceil(tile_w) * (h * ss).div_ceil(u64::from(TILE));
     e.add("triangles", bytes_of::<ScreenTriangle>(g.triangles));
     e.add("triangles: tile bins", g.triangles.saturating_mul(16).saturating_add(tiles * 32));
     // The largest object's world-space mesh and clip-space vertices (its triangles are
@@ -651,7 +667,8 @@ fn shade_bands(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<usize, MemoryError> {
     let (sw, sh) = (w * ss, h * ss);
-    let (tx, ty) = (sw.div_ceil(TILE), sh.div_ceil(TILE));
+    let tile_w = tile_width(sw, !streamed.streams.is_empty());
+    let (tx, ty) = (sw.div_ceil(tile_w), sh.div_ceil(TILE));
     let mut bins: Vec<Vec<(f32, Item)>> =
         pomkit_core::memory::try_vec(Vec::new(), (tx * ty) as usize).map_err(|e| MemoryError::Allocation {
             what: format!("the tile bins of a {sw}x{sh}-sample frame"),
@@ -661,7 +678,7 @@ fn shade_bands(
         })?;
     let mut bin = |(x0, y0, x1, y1): (u32, u32, u32, u32), z: f32, item: Item| {
         for by in y0 / TILE..=(y1 - 1) / TILE {
-            for bx in x0 / TILE..=(x1 - 1) / TILE {
+            for bx in x0 / tile_w..=(x1 - 1) / tile_w {
                 bins[(by * tx + bx) as usize].push((z, item));
             }
         }
@@ -735,17 +752,17 @@ fn shade_bands(
                         prepared,
                         (tris, streamed),
                         &bins[(by * tx + bx) as usize],
-                        (bx, by),
+                        [bx * tile_w, by * TILE, ((bx + 1) * tile_w).min(sw), ((by + 1) * TILE).min(sh)],
                         (sw, sh),
                         shading,
                     );
                     let n = done.fetch_add(1, Ordering::Relaxed) + 1;
                     progress(n, total);
-                    (bx * TILE, by * TILE, buf)
+                    (bx * tile_w, by * TILE, buf)
                 })
                 .collect();
             for (x0, y0, buf) in tiles {
-                let tw = ((x0 + TILE).min(sw) - x0) as usize;
+                let tw = ((x0 + tile_w).min(sw) - x0) as usize;
                 for (r, line) in buf.chunks(tw).enumerate() {
                     let y = y0 as usize + r - sy0 as usize;
                     let at = y * sw as usize + x0 as usize;
@@ -765,24 +782,21 @@ enum Item {
     Block(u32, u32),
 }
 
-/// Shades tile `(bx, by)` of a `sw x sh`-sample frame: its samples, row-major.
+/// Shades the tile `[x0, x1) x [y0, y1)` of a `sw x sh`-sample frame: its samples, row-major.
 fn shade_tile(
     scene: &Scene,
     prepared: &[Prepared],
     (tris, streamed): (&[ScreenTriangle], &Streamed<'_>),
     bin: &[(f32, Item)],
-    (bx, by): (u32, u32),
+    [x0, y0, x1, y1]: [u32; 4],
     (sw, sh): (u32, u32),
     shading: Shading,
 ) -> Vec<Option<Sample>> {
-    let (x0, y0) = (bx * TILE, by * TILE);
-    let (x1, y1) = ((x0 + TILE).min(sw), (y0 + TILE).min(sh));
     let tw = x1 - x0;
     let mut buf: Vec<Option<Sample>> = vec![None; (tw * (y1 - y0)) as usize];
     // With visibility first, the triangles only find each sample's nearest fragment; the
     // visible ones are shaded at the end, in full packets.
-    let mut visible: Vec<Option<(u32, Fragment)>> =
-        if shading.visibility_first { vec![None; buf.len()] } else { Vec::new() };
+    let mut visible = if shading.visibility_first { Visible::new(buf.len()) } else { Visible::default() };
     // One packet for the tile, emptied after each triangle.
     let mut packet = Packet::default();
     let mut draw = |tri: &ScreenTriangle, buf: &mut Vec<Option<Sample>>| {
@@ -813,7 +827,7 @@ fn shade_tile(
                     }
                     let [a, b, c] = tri.map(|k| block.screen[k as usize]);
                     let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-                    if hi.x < fx0 || lo.x > fx1 || hi.y < fy0 || lo.y > fy1 {
+                    if hi.x < fx0 || lo.x > fx1 || hi.y < fy0 || lo.y > fy1 || !holds_a_centre(lo, hi) {
                         continue;
                     }
                     if let Some(st) = setup(&t, sw, sh, object, true) {
@@ -826,7 +840,57 @@ fn shade_tile(
     if shading.visibility_first {
         shade_visible(scene, prepared, &visible, tw, shading, &mut buf);
     }
+    visible.give_back();
     buf
+}
+
+/// What a tile's visibility pass finds: per sample the object and depth of its nearest fragment
+/// so far (`EMPTY`: none), and the fragment itself (in a buffer of this thread's, reused from
+/// tile to tile: only the slots `nearest` marks are read).
+#[derive(Default)]
+struct Visible {
+    nearest: Vec<(u32, f32)>,
+    frags: Vec<Fragment>,
+}
+
+impl Visible {
+    const EMPTY: u32 = u32::MAX;
+
+    thread_local! {
+        static SCRATCH: std::cell::RefCell<Vec<Fragment>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
+
+    fn new(samples: usize) -> Self {
+        let mut frags = Self::SCRATCH.with_borrow_mut(std::mem::take);
+        if frags.len() < samples {
+            frags.resize(samples, Fragment::default());
+        }
+        Self { nearest: vec![(Self::EMPTY, 0.0); samples], frags }
+    }
+
+    /// The fragment buffer back to the thread, for its next tile.
+    fn give_back(self) {
+        if !self.frags.is_empty() {
+            Self::SCRATCH.with_borrow_mut(|s| *s = self.frags);
+        }
+    }
+
+    /// The object and fragment nearest at sample `at`, if any.
+    fn get(&self, at: usize) -> Option<(u32, &Fragment)> {
+        let (object, _) = self.nearest[at];
+        (object != Self::EMPTY).then(|| (object, &self.frags[at]))
+    }
+}
+
+/// Whether the box `[lo, hi]` of a triangle's screen positions (samples, in f32) may hold a
+/// sample's centre (`k + 0.5` on both axes) once its vertices are snapped to 1/256 sample by
+/// [`setup`]: the snap and the f32 positions differ by far less than the 1/64 sample of margin.
+/// A subdivided triangle smaller than a sample usually holds none and needs no set-up.
+fn holds_a_centre(lo: Vec2, hi: Vec2) -> bool {
+    const MARGIN: f32 = 1.0 / 64.0;
+    let first = (lo - (0.5 + MARGIN)).ceil();
+    let last = (hi - (0.5 - MARGIN)).floor();
+    first.cmple(last).all()
 }
 
 /// Rasterizes `tri` into the tile `[x0, x1) x [y0, y1)` whose samples `buf` holds, shading the
@@ -842,42 +906,65 @@ fn draw(
 ) {
     let tw = x1 - x0;
     let prep = &prepared[scene.objects[tri.object as usize].material];
-    let at = |x: u32, y: u32| ((y - y0) * tw + (x - x0)) as usize;
-    // The fragments a packet holds, written when it is shaded: the early depth test reads the
-    // buffer as it was before them.
-    let buf = std::cell::RefCell::new(buf);
-    tri.rasterize_tested(
-        x0,
-        y0,
-        x1,
-        y1,
-        // Early depth test with the polygon's depth: the displaced depth is never nearer, so a
-        // fragment behind the stored one stays behind. The fragments of one triangle cover
-        // distinct samples, so the test may run before the packet's earlier fragments land.
-        |x, y, z| !buf.borrow()[at(x, y)].is_some_and(|s| s.z <= z),
-        |f: &Fragment| {
-            if packet.push(*f, at(f.x, f.y)) {
-                packet.shade_into(scene, prep, shading, &mut buf.borrow_mut());
+    /// The packet's sink: the early depth test against the tile's samples, fragments into the
+    /// packet, shaded when it is full.
+    struct Into<'a> {
+        scene: &'a Scene,
+        prep: &'a Prepared,
+        shading: Shading,
+        packet: &'a mut Packet,
+        buf: &'a mut [Option<Sample>],
+        origin: (u32, u32, u32),
+    }
+    impl raster::FragmentSink for Into<'_> {
+        fn keep(&mut self, x: u32, y: u32, z: f32) -> bool {
+            let (x0, y0, tw) = self.origin;
+            // Early depth test with the polygon's depth: the displaced depth is never nearer, so
+            // a fragment behind the stored one stays behind. The fragments of one triangle cover
+            // distinct samples, so the test may run before the packet's earlier fragments land.
+            !self.buf[((y - y0) * tw + (x - x0)) as usize].is_some_and(|s| s.z <= z)
+        }
+        fn slot(&mut self, _: u32, _: u32) -> &mut Fragment {
+            self.packet.slot()
+        }
+        fn written(&mut self, x: u32, y: u32) {
+            let (x0, y0, tw) = self.origin;
+            if self.packet.commit(((y - y0) * tw + (x - x0)) as usize) {
+                self.packet.shade_into(self.scene, self.prep, self.shading, self.buf);
             }
-        },
-    );
-    packet.shade_into(scene, prep, shading, &mut buf.into_inner());
+        }
+    }
+    let mut sink = Into { scene, prep, shading, packet, buf, origin: (x0, y0, tw) };
+    tri.rasterize_into(x0, y0, x1, y1, &mut sink);
+    sink.packet.shade_into(scene, prep, shading, sink.buf);
 }
 
 /// Rasterizes `tri` into the tile `[x0, x1) x [y0, y1)` for a visibility pass: `visible` keeps
 /// each sample's nearest fragment (the first drawn among equals) and its object, unshaded.
-fn draw_visible(tri: &ScreenTriangle, (x0, y0, x1, y1): (u32, u32, u32, u32), visible: &mut [Option<(u32, Fragment)>]) {
-    let tw = x1 - x0;
-    let at = |x: u32, y: u32| ((y - y0) * tw + (x - x0)) as usize;
-    let visible = std::cell::RefCell::new(visible);
-    tri.rasterize_tested(
-        x0,
-        y0,
-        x1,
-        y1,
-        |x, y, z| visible.borrow()[at(x, y)].is_none_or(|(_, v)| z < v.z),
-        |f: &Fragment| visible.borrow_mut()[at(f.x, f.y)] = Some((tri.object, *f)),
-    );
+fn draw_visible(tri: &ScreenTriangle, (x0, y0, x1, y1): (u32, u32, u32, u32), visible: &mut Visible) {
+    /// The nearest fragment of each sample, written where it is kept.
+    struct Nearest<'a> {
+        visible: &'a mut Visible,
+        object: u32,
+        origin: (u32, u32, u32),
+    }
+    impl raster::FragmentSink for Nearest<'_> {
+        fn keep(&mut self, x: u32, y: u32, z: f32) -> bool {
+            let (x0, y0, tw) = self.origin;
+            let (object, near) = &mut self.visible.nearest[((y - y0) * tw + (x - x0)) as usize];
+            let nearer = *object == Visible::EMPTY || z < *near;
+            if nearer {
+                (*object, *near) = (self.object, z);
+            }
+            nearer
+        }
+        fn slot(&mut self, x: u32, y: u32) -> &mut Fragment {
+            let (x0, y0, tw) = self.origin;
+            &mut self.visible.frags[((y - y0) * tw + (x - x0)) as usize]
+        }
+        fn written(&mut self, _: u32, _: u32) {}
+    }
+    tri.rasterize_into(x0, y0, x1, y1, &mut Nearest { visible, object: tri.object, origin: (x0, y0, x1 - x0) });
 }
 
 /// Shades the visible fragments of a tile `tw` samples wide ([`draw_visible`]) into `buf`,
@@ -885,12 +972,12 @@ fn draw_visible(tri: &ScreenTriangle, (x0, y0, x1, y1): (u32, u32, u32, u32), vi
 fn shade_visible(
     scene: &Scene,
     prepared: &[Prepared],
-    visible: &[Option<(u32, Fragment)>],
+    visible: &Visible,
     tw: u32,
     shading: Shading,
     buf: &mut [Option<Sample>],
 ) {
-    let th = visible.len() as u32 / tw.max(1);
+    let th = visible.nearest.len() as u32 / tw.max(1);
     // One open packet per material seen in the tile.
     let mut open: Vec<(usize, Packet)> = Vec::new();
     for qy in (0..th).step_by(2) {
@@ -901,8 +988,8 @@ fn shade_visible(
                     continue;
                 }
                 let at = (y * tw + x) as usize;
-                let Some((object, f)) = &visible[at] else { continue };
-                let material = scene.objects[*object as usize].material;
+                let Some((object, f)) = visible.get(at) else { continue };
+                let material = scene.objects[object as usize].material;
                 let i = match open.iter().position(|(m, _)| *m == material) {
                     Some(i) => i,
                     None => {
@@ -925,7 +1012,9 @@ fn shade_visible(
 /// Up to [`LANES`] fragments of one material waiting to be shaded, and the samples they go to.
 #[derive(Default)]
 struct Packet {
+    /// The fragments (the first `written`; the rest are scratch for the next ones).
     frags: Vec<Fragment>,
+    written: usize,
     slots: [usize; LANES],
     /// Scratch: each light's shadows of the packet.
     shadows: Vec<[Option<Shadow>; LANES]>,
@@ -934,28 +1023,44 @@ struct Packet {
 impl Packet {
     /// Adds fragment `f` for sample `slot`; true when the packet is full.
     fn push(&mut self, f: Fragment, slot: usize) -> bool {
-        self.slots[self.frags.len()] = slot;
-        self.frags.push(f);
-        self.frags.len() == LANES
+        *self.slot() = f;
+        self.commit(slot)
+    }
+
+    /// Where the packet's next fragment is written (then [`Packet::commit`]).
+    fn slot(&mut self) -> &mut Fragment {
+        if self.frags.len() == self.written {
+            self.frags.push(Fragment::default());
+        }
+        &mut self.frags[self.written]
+    }
+
+    /// Takes the fragment written to [`Packet::slot`] into the packet, for sample `slot`; true
+    /// when the packet is full.
+    fn commit(&mut self, slot: usize) -> bool {
+        self.slots[self.written] = slot;
+        self.written += 1;
+        self.written == LANES
     }
 
     /// Shades the packet's fragments ([`shade_packet`], or one at a time for
     /// [`Simd8::unpacked`]) and writes those nearer than what `buf` holds; empties the packet.
     fn shade_into(&mut self, scene: &Scene, prep: &Prepared, shading: Shading, buf: &mut [Option<Sample>]) {
-        if self.frags.is_empty() {
+        if self.written == 0 {
             return;
         }
+        let frags = &self.frags[..self.written];
         let mut out = [None; LANES];
         let level = shading.level;
         if shading.packets {
-            let (frags, shadows) = (&self.frags, &mut self.shadows);
+            let shadows = &mut self.shadows;
             dispatch!(level, simd => shade_packet(simd, scene, prep, &shading, frags, shadows, &mut out));
         } else {
-            for (o, f) in out.iter_mut().zip(&self.frags) {
+            for (o, f) in out.iter_mut().zip(frags) {
                 *o = shade(scene, prep, &shading, f);
             }
         }
-        for (k, s) in out.into_iter().enumerate().take(self.frags.len()) {
+        for (k, s) in out.into_iter().enumerate().take(frags.len()) {
             // A silhouette pixel whose ray leaves the relief is discarded: it writes nothing.
             let Some(mut s) = s else { continue };
             if shading.lod_tint && prep.lod_basis.is_some() {
@@ -968,7 +1073,7 @@ impl Packet {
                 *slot = Some(s);
             }
         }
-        self.frags.clear();
+        self.written = 0;
     }
 }
 

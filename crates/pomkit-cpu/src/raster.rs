@@ -89,6 +89,23 @@ pub struct ScreenTriangle {
     small: bool,
     /// Least depth of the three vertices, for front-to-back ordering.
     pub min_z: f32,
+    /// Which varyings the fragments need beyond the world position, normal, UV and depth (all
+    /// of them after [`setup`]); the others are left zero.
+    pub needs: Needs,
+}
+
+/// Varyings a triangle's fragments may go without ([`ScreenTriangle::needs`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Needs {
+    /// The tangent and `uv_scale` (a tangent frame: all but `flat`).
+    pub frame: bool,
+    /// The curvature (silhouettes only).
+    pub curvature: bool,
+}
+
+impl Needs {
+    /// Every varying.
+    pub const ALL: Self = Self { frame: true, curvature: true };
 }
 
 /// Clips a triangle against the near plane `z >= 0` (wgpu clip space) and against `w > 0`,
@@ -226,7 +243,7 @@ pub fn setup(tri: &[ClipVertex; 3], width: u32, height: u32, object: u32, cull: 
     }
     let min_z = z[0].min(z[1]).min(z[2]);
     let small = fixed.iter().flatten().all(|c| c.abs() < SMALL);
-    Some(ScreenTriangle { p, z, inv_w, v, object, fixed, area: area2 as f64, small, min_z })
+    Some(ScreenTriangle { p, z, inv_w, v, object, fixed, area: area2 as f64, small, min_z, needs: Needs::ALL })
 }
 
 /// The bound below which fixed-point coordinates take the i64 edge functions.
@@ -249,7 +266,7 @@ fn edge_function(a: [i64; 2], b: [i64; 2], q: [i64; 2]) -> i128 {
 }
 
 /// What the rasterizer hands the shader for one pixel of a quad.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Fragment {
     /// Pixel coordinates.
     pub x: u32,
@@ -304,6 +321,32 @@ impl ScreenTriangle {
         self.interpolate_edges(self.edges_at(q))
     }
 
+    /// The triangle with its fragments' varyings cut to `needs`.
+    #[must_use]
+    pub fn needing(self, needs: Needs) -> Self {
+        Self { needs, ..self }
+    }
+
+    /// [`Varyings::lerp3`] into `v`, field by field, of the varyings in
+    /// [`ScreenTriangle::needs`] (the same values); the others are set to zero.
+    #[inline(always)]
+    fn lerp_into(&self, v: &mut Varyings, w: Vec3) {
+        let [a, b, c] = &self.v;
+        v.world = a.world * w.x + b.world * w.y + c.world * w.z;
+        v.normal = a.normal * w.x + b.normal * w.y + c.normal * w.z;
+        v.uv = a.uv * w.x + b.uv * w.y + c.uv * w.z;
+        v.depth = a.depth * w.x + b.depth * w.y + c.depth * w.z;
+        if self.needs.frame {
+            v.tangent = a.tangent * w.x + b.tangent * w.y + c.tangent * w.z;
+            v.uv_scale = a.uv_scale * w.x + b.uv_scale * w.y + c.uv_scale * w.z;
+        } else {
+            v.tangent = Vec4::ZERO;
+            v.uv_scale = Vec2::ZERO;
+        }
+        v.curvature =
+            if self.needs.curvature { a.curvature * w.x + b.curvature * w.y + c.curvature * w.z } else { Vec3::ZERO };
+    }
+
     /// Perspective-correct varyings and depth at the point of edge functions `w`.
     #[cfg(test)]
     fn interpolate_edges(&self, w: [i128; 3]) -> (Varyings, f32, bool) {
@@ -342,23 +385,29 @@ impl ScreenTriangle {
     /// Rasterizes the part of the triangle inside `[x0, x1) x [y0, y1)` (x0, y0 even) in 2x2
     /// quads, calling `shade` for each covered pixel with derivatives from its quad.
     pub fn rasterize(&self, x0: u32, y0: u32, x1: u32, y1: u32, shade: impl FnMut(&Fragment)) {
-        self.rasterize_tested(x0, y0, x1, y1, |_, _, _| true, shade);
+        /// Every covered pixel, handed to `shade` from a scratch fragment.
+        struct Each<F>(F, Fragment);
+        impl<F: FnMut(&Fragment)> FragmentSink for Each<F> {
+            fn keep(&mut self, _: u32, _: u32, _: f32) -> bool {
+                true
+            }
+            fn slot(&mut self, _: u32, _: u32) -> &mut Fragment {
+                &mut self.1
+            }
+            fn written(&mut self, _: u32, _: u32) {
+                (self.0)(&self.1);
+            }
+        }
+        self.rasterize_into(x0, y0, x1, y1, &mut Each(shade, Fragment::default()));
     }
 
-    /// [`ScreenTriangle::rasterize`] with a depth test before the interpolation: `keep(x, y, z)`
-    /// decides from a covered pixel's position and depth whether it is shaded, and only the
-    /// pixels it keeps get their varyings interpolated (the quad's other pixels, helpers for
-    /// the derivatives, get their UV only). The fragments are the ones `rasterize` gives, bit
-    /// for bit.
-    pub fn rasterize_tested(
-        &self,
-        x0: u32,
-        y0: u32,
-        x1: u32,
-        y1: u32,
-        mut keep: impl FnMut(u32, u32, f32) -> bool,
-        mut shade: impl FnMut(&Fragment),
-    ) {
+    /// [`ScreenTriangle::rasterize`] with a depth test before the interpolation, into `sink`:
+    /// [`FragmentSink::keep`] decides from a covered pixel's position and depth whether it is
+    /// shaded, and only the pixels it keeps get their varyings interpolated (the quad's other
+    /// pixels, helpers for the derivatives, get their UV only), written field by field where
+    /// the sink keeps them ([`FragmentSink::slot`]). The fragments are the ones `rasterize`
+    /// gives, bit for bit.
+    pub fn rasterize_into(&self, x0: u32, y0: u32, x1: u32, y1: u32, sink: &mut impl FragmentSink) {
         let Some((bx0, by0, bx1, by1)) = self.quad_bounds(x0, y0, x1, y1) else { return };
         let inside = |x: u32, y: u32| x >= x0 && x < x1 && y >= y0 && y < y1;
         let (qx0, qy0) = (bx0 & !1, by0 & !1);
@@ -397,7 +446,7 @@ impl ScreenTriangle {
                     }
                     if mask != 0 {
                         let w = w.map(|wk| wk.map(|v| v as f64));
-                        self.emit_quad(qx, qy, mask, &w, inside, &mut keep, &mut shade);
+                        self.emit_quad(qx, qy, mask, &w, inside, sink);
                     }
                     for i in 0..3 {
                         e[i] += 2 * step_x[i];
@@ -426,7 +475,7 @@ impl ScreenTriangle {
                     mask |= u32::from(self.covered_by(e)) << k;
                 }
                 if mask != 0 {
-                    self.emit_quad(qx, qy, mask, &w, inside, &mut keep, &mut shade);
+                    self.emit_quad(qx, qy, mask, &w, inside, sink);
                 }
                 qx += 2;
             }
@@ -435,9 +484,8 @@ impl ScreenTriangle {
     }
 
     /// The fragments of the quad at `(qx, qy)` whose pixels `mask` covers (bit `k` for pixel
-    /// `(qx + k % 2, qy + k / 2)`) and `inside` and `keep` accept, from the quad's edge functions
-    /// `w` (as `f64`, exactly).
-    #[expect(clippy::too_many_arguments, reason = "a quad, its coverage and the two stages")]
+    /// `(qx + k % 2, qy + k / 2)`) and `inside` and the sink accept, from the quad's edge
+    /// functions `w` (as `f64`, exactly).
     #[inline(always)]
     fn emit_quad(
         &self,
@@ -446,8 +494,7 @@ impl ScreenTriangle {
         mask: u32,
         w: &[[f64; 3]; 4],
         inside: impl Fn(u32, u32) -> bool,
-        keep: &mut impl FnMut(u32, u32, f32) -> bool,
-        shade: &mut impl FnMut(&Fragment),
+        sink: &mut impl FragmentSink,
     ) {
         let [va, vb, vc] = &self.v;
         // Every pixel's perspective-correct weights and UV (the derivatives need all four), the
@@ -466,12 +513,28 @@ impl ScreenTriangle {
         let duv_dy = 0.5 * ((uv[2] - uv[0]) + (uv[3] - uv[1]));
         for k in 0..4 {
             let (x, y) = (qx + (k & 1) as u32, qy + (k >> 1) as u32);
-            if mask & (1 << k) != 0 && inside(x, y) && keep(x, y, z[k]) {
-                let v = Varyings::lerp3(va, vb, vc, pc[k]);
-                shade(&Fragment { x, y, z: z[k], v, duv_dx, duv_dy });
+            if mask & (1 << k) != 0 && inside(x, y) && sink.keep(x, y, z[k]) {
+                let f = sink.slot(x, y);
+                f.x = x;
+                f.y = y;
+                f.z = z[k];
+                f.duv_dx = duv_dx;
+                f.duv_dy = duv_dy;
+                self.lerp_into(&mut f.v, pc[k]);
+                sink.written(x, y);
             }
         }
     }
+}
+
+/// Where [`ScreenTriangle::rasterize_into`] puts the fragments of a triangle.
+pub trait FragmentSink {
+    /// Whether the covered pixel `(x, y)`, at depth `z`, gets a fragment.
+    fn keep(&mut self, x: u32, y: u32, z: f32) -> bool;
+    /// Where the fragment of pixel `(x, y)` (just kept) is written; every field is set.
+    fn slot(&mut self, x: u32, y: u32) -> &mut Fragment;
+    /// The fragment of pixel `(x, y)` is written.
+    fn written(&mut self, x: u32, y: u32);
 }
 
 /// Whether the edge from `a` to `b` is a top or a left edge, whose pixel centres exactly on it
