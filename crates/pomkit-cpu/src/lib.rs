@@ -888,9 +888,10 @@ impl Visible {
 /// A subdivided triangle smaller than a sample usually holds none and needs no set-up.
 fn holds_a_centre(lo: Vec2, hi: Vec2) -> bool {
     const MARGIN: f32 = 1.0 / 64.0;
-    let first = (lo - (0.5 + MARGIN)).ceil();
-    let last = (hi - (0.5 - MARGIN)).floor();
-    first.cmple(last).all()
+    // (`floor`, not `f32::floor`: no call into libm on baseline x86-64.)
+    let ceil = |x: f32| -floor(-x);
+    let holds = |lo: f32, hi: f32| ceil(lo - (0.5 + MARGIN)) <= floor(hi - (0.5 - MARGIN));
+    holds(lo.x, hi.x) && holds(lo.y, hi.y)
 }
 
 /// Rasterizes `tri` into the tile `[x0, x1) x [y0, y1)` whose samples `buf` holds, shading the
