@@ -90,6 +90,8 @@ pub struct DisplacedBlocks<'a> {
     blocks: Vec<[u32; 3]>,
     /// Per block with a view: its strides and maybe its screen bounds (empty without a view).
     plans: Vec<BlockPlan>,
+    /// The field's least and greatest depth.
+    depth_range: (f32, f32),
     triangles: u64,
 }
 
@@ -179,8 +181,20 @@ impl Mesh {
                 }
             }
         }
-        let mut out =
-            DisplacedBlocks { mesh, plan, field, edges, depth_scale, view, blocks, plans: Vec::new(), triangles };
+        let depth_range =
+            field.depths().iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &d| (l.min(d), h.max(d)));
+        let mut out = DisplacedBlocks {
+            mesh,
+            plan,
+            field,
+            edges,
+            depth_scale,
+            view,
+            blocks,
+            plans: Vec::new(),
+            depth_range,
+            triangles,
+        };
         // Every block's strides, decided once (each is a function of the block alone).
         if out.view.is_some() {
             let plans: Vec<BlockPlan> = (0..out.blocks.len())
@@ -312,6 +326,16 @@ impl DisplacedBlocks<'_> {
             return fine_block;
         }
         let (mesh, plan) = (self.mesh.as_ref(), &self.plan);
+        // The corners, undisplaced.
+        let corners = [(i0, j0), (i1, j0), (i0, j1), (i1, j1)];
+        let blended =
+            corners.map(|(i, j)| (i + j <= n).then(|| plan.blend(mesh, t, plan.grid_point(t, i, j, n), n, face)));
+        if block_ok && self.outside_view(t, &blended, view) {
+            // Never drawn: no strides to plan, and bounds that bin it nowhere. (A neighbour may
+            // give their common side another stride: the side is out of view too.)
+            let nowhere = ScreenBounds { min: Vec2::INFINITY, max: Vec2::NEG_INFINITY, min_z: 1.0 };
+            return BlockPlan { stride: 1, sides: [1; 4], bounds: Some(nowhere) };
+        }
         // The field's depth at every grid point of the block inside the triangle (at the point's
         // barycentric UV, in f32: a function of the point alone, as both blocks of a side need).
         let width = (k + 1) as usize;
@@ -326,11 +350,7 @@ impl DisplacedBlocks<'_> {
             }
         }
         let f = |a: u32, b: u32| fine[b as usize * width + a as usize];
-        // The corners, undisplaced, and the projected length of the full depth at each, in
-        // samples.
-        let corners = [(i0, j0), (i1, j0), (i0, j1), (i1, j1)];
-        let blended =
-            corners.map(|(i, j)| (i + j <= n).then(|| plan.blend(mesh, t, plan.grid_point(t, i, j, n), n, face)));
+        // The projected length of the full depth at each corner, in samples.
         let reaches: [Option<f32>; 4] = blended.map(|v| {
             let v = v?;
             let down = v.normal * (self.depth_scale * uv_unit_length(v.uv_scale));
@@ -433,6 +453,38 @@ impl DisplacedBlocks<'_> {
             }
         }
         Some(out)
+    }
+
+    /// Whether an interior block of a flat input triangle (one normal and one `uv_scale` at its
+    /// corners) lies wholly outside the view: its vertices are its undisplaced square moved
+    /// along that normal by depths within the field's range, so they lie in the prism over the
+    /// square's `corners` from the field's least to its greatest depth, which is outside when
+    /// all of its eight corners are beyond one plane of the view volume (clip space is affine
+    /// in the world). `false` whenever it cannot tell.
+    fn outside_view(&self, t: usize, corners: &[Option<super::displace::Blended>; 4], view: &DisplacementView) -> bool {
+        let [a, b, c] = self.plan.triangles[t].map(|v| v as usize);
+        let m = self.mesh.as_ref();
+        let same = |x: usize| m.normals[x] == m.normals[a] && m.uv_scale[x] == m.uv_scale[a];
+        if !(same(b) && same(c)) {
+            return false;
+        }
+        let (lo, hi) = self.depth_range;
+        let down = m.normals[a] * (self.depth_scale * uv_unit_length(m.uv_scale[a]));
+        // Per plane of the view volume, whether every corner is beyond it.
+        let mut beyond = [true; 5];
+        for v in corners {
+            let Some(v) = v.as_ref() else { return false };
+            for d in [lo, hi] {
+                let q = view.view_proj * (v.position - down * d).extend(1.0);
+                if !q.is_finite() {
+                    return false;
+                }
+                for (k, out) in [q.x > q.w, q.x < -q.w, q.y > q.w, q.y < -q.w, q.z < 0.0].into_iter().enumerate() {
+                    beyond[k] &= out;
+                }
+            }
+        }
+        beyond.contains(&true)
     }
 
     /// Where block `index` can be on screen, when its plan for the view could tell without
@@ -743,6 +795,36 @@ mod tests {
         let rough = HeightField::from_height_fn(128, 128, |x, y| if (x + y) % 2 == 0 { 0.0 } else { 1.0 });
         let blocks = plane.displaced_blocks(&rough, EdgeMode::Wrap, 0.05, 1.0, Some(view));
         assert!(all_blocks(&blocks).iter().all(|b| b.stride == 1));
+    }
+
+    #[test]
+    fn blocks_planned_out_of_view_have_every_vertex_beyond_one_plane_of_the_view() {
+        // A plane far larger than the view, partly behind the camera: many blocks are out of it.
+        let field = generate(Pattern::Pyramids, 96, 96);
+        let plane = Mesh::plane(Vec2::splat(6.0), 1).scale_uvs(Vec2::splat(8.0));
+        let view = grazing_view(Vec2::new(320.0, 180.0), 0.125);
+        let blocks = plane.displaced_blocks(&field, EdgeMode::Wrap, 0.08, 1.0, Some(view));
+        let mut b = DisplacedBlock::default();
+        let (mut out, mut seen) = (0, 0);
+        for i in 0..blocks.len() {
+            blocks.block(i, &mut b);
+            let beyond = |k: usize| {
+                b.positions.iter().all(|&p| {
+                    let q = view.view_proj * p.extend(1.0);
+                    [q.x > q.w, q.x < -q.w, q.y > q.w, q.y < -q.w, q.z < 0.0][k]
+                })
+            };
+            let outside = (0..5).any(beyond);
+            match blocks.screen_bounds(i) {
+                Some(s) if !s.min.is_finite() => {
+                    out += 1;
+                    assert!(outside, "block {i} planned out of view has a vertex in it");
+                }
+                _ => seen += usize::from(!outside),
+            }
+        }
+        assert!(out as f64 > 0.3 * blocks.len() as f64, "{out} of {} blocks out of view", blocks.len());
+        assert!(seen > 0);
     }
 
     #[test]
