@@ -270,7 +270,12 @@ impl CpuRenderer {
 /// Whether an object of this material is drawn as a [`Stream`]: the displaced reference of a
 /// height-mapped material.
 fn streamed(prep: &Prepared, opts: &RenderOptions) -> bool {
-    opts.mode == Mode::Displaced && prep.material.height.is_some()
+    streams(&prep.material, opts)
+}
+
+/// [`streamed`] for a material not yet prepared.
+fn streams(material: &Material, opts: &RenderOptions) -> bool {
+    opts.mode == Mode::Displaced && material.height.is_some()
 }
 
 /// A height-mapped object of the displaced reference: its subdivided, displaced triangles in
@@ -494,11 +499,8 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
         threads.saturating_mul(2).saturating_mul(band).min(2 * bytes_of::<Option<Sample>>(w * h * ss * ss)),
     );
     // Each tile being shaded: its samples, and with visibility first its nearest fragments.
-    let streams = scene
-        .objects
-        .iter()
-        .any(|o| opts.mode == Mode::Displaced && scene.materials.get(o.material).is_some_and(|m| m.height.is_some()));
-    let tile_w = u64::from(tile_width(opts.width.saturating_mul(opts.supersample.clamp(1, 8)), streams));
+    let streamed = scene.objects.iter().any(|o| scene.materials.get(o.material).is_some_and(|m| streams(m, opts)));
+    let tile_w = u64::from(tile_width(opts.width.saturating_mul(opts.supersample.clamp(1, 8)), streamed));
     let tile = tile_w * u64::from(TILE);
     e.add(
         "tiles in flight",
@@ -909,33 +911,31 @@ fn draw(
     let prep = &prepared[scene.objects[tri.object as usize].material];
     /// The packet's sink: the early depth test against the tile's samples, fragments into the
     /// packet, shaded when it is full.
-    struct Into<'a> {
+    struct Packets<'a> {
         scene: &'a Scene,
         prep: &'a Prepared,
         shading: Shading,
         packet: &'a mut Packet,
         buf: &'a mut [Option<Sample>],
-        origin: (u32, u32, u32),
+        tile: TileOrigin,
     }
-    impl raster::FragmentSink for Into<'_> {
+    impl raster::FragmentSink for Packets<'_> {
         fn keep(&mut self, x: u32, y: u32, z: f32) -> bool {
-            let (x0, y0, tw) = self.origin;
             // Early depth test with the polygon's depth: the displaced depth is never nearer, so
             // a fragment behind the stored one stays behind. The fragments of one triangle cover
             // distinct samples, so the test may run before the packet's earlier fragments land.
-            !self.buf[((y - y0) * tw + (x - x0)) as usize].is_some_and(|s| s.z <= z)
+            !self.buf[self.tile.at(x, y)].is_some_and(|s| s.z <= z)
         }
         fn slot(&mut self, _: u32, _: u32) -> &mut Fragment {
             self.packet.slot()
         }
         fn written(&mut self, x: u32, y: u32) {
-            let (x0, y0, tw) = self.origin;
-            if self.packet.commit(((y - y0) * tw + (x - x0)) as usize) {
+            if self.packet.commit(self.tile.at(x, y)) {
                 self.packet.shade_into(self.scene, self.prep, self.shading, self.buf);
             }
         }
     }
-    let mut sink = Into { scene, prep, shading, packet, buf, origin: (x0, y0, tw) };
+    let mut sink = Packets { scene, prep, shading, packet, buf, tile: TileOrigin { x0, y0, tw } };
     tri.rasterize_into(x0, y0, x1, y1, &mut sink);
     sink.packet.shade_into(scene, prep, shading, sink.buf);
 }
@@ -947,12 +947,11 @@ fn draw_visible(tri: &ScreenTriangle, (x0, y0, x1, y1): (u32, u32, u32, u32), vi
     struct Nearest<'a> {
         visible: &'a mut Visible,
         object: u32,
-        origin: (u32, u32, u32),
+        tile: TileOrigin,
     }
     impl raster::FragmentSink for Nearest<'_> {
         fn keep(&mut self, x: u32, y: u32, z: f32) -> bool {
-            let (x0, y0, tw) = self.origin;
-            let (object, near) = &mut self.visible.nearest[((y - y0) * tw + (x - x0)) as usize];
+            let (object, near) = &mut self.visible.nearest[self.tile.at(x, y)];
             let nearer = *object == Visible::EMPTY || z < *near;
             if nearer {
                 (*object, *near) = (self.object, z);
@@ -960,12 +959,28 @@ fn draw_visible(tri: &ScreenTriangle, (x0, y0, x1, y1): (u32, u32, u32, u32), vi
             nearer
         }
         fn slot(&mut self, x: u32, y: u32) -> &mut Fragment {
-            let (x0, y0, tw) = self.origin;
-            &mut self.visible.frags[((y - y0) * tw + (x - x0)) as usize]
+            &mut self.visible.frags[self.tile.at(x, y)]
         }
         fn written(&mut self, _: u32, _: u32) {}
     }
-    tri.rasterize_into(x0, y0, x1, y1, &mut Nearest { visible, object: tri.object, origin: (x0, y0, x1 - x0) });
+    let tile = TileOrigin { x0, y0, tw: x1 - x0 };
+    tri.rasterize_into(x0, y0, x1, y1, &mut Nearest { visible, object: tri.object, tile });
+}
+
+/// A tile's first sample and width: where a sample of the frame is in the tile's buffers.
+#[derive(Clone, Copy)]
+struct TileOrigin {
+    x0: u32,
+    y0: u32,
+    tw: u32,
+}
+
+impl TileOrigin {
+    /// The index of sample `(x, y)` (inside the tile) in its row-major buffers.
+    #[inline]
+    fn at(self, x: u32, y: u32) -> usize {
+        ((y - self.y0) * self.tw + (x - self.x0)) as usize
+    }
 }
 
 /// Shades the visible fragments of a tile `tw` samples wide ([`draw_visible`]) into `buf`,

@@ -367,7 +367,9 @@ impl ScreenTriangle {
     #[cfg(test)]
     fn interpolate_edges(&self, w: [i128; 3]) -> (Varyings, f32, bool) {
         let (pc, z) = self.weights_at(w.map(|v| v as f64));
-        (Varyings::lerp3(&self.v[0], &self.v[1], &self.v[2], pc), z, self.covered_by(w))
+        let mut v = Varyings::default();
+        self.lerp_into(&mut v, pc);
+        (v, z, self.covered_by(w))
     }
 
     /// The perspective-correct barycentric weights and the depth at the point of edge

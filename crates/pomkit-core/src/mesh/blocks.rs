@@ -90,7 +90,7 @@ pub struct DisplacedBlocks<'a> {
     blocks: Vec<[u32; 3]>,
     /// Per block with a view: its strides and maybe its screen bounds (empty without a view).
     plans: Vec<BlockPlan>,
-    /// The field's least and greatest depth.
+    /// The field's least and greatest depth (with a view).
     depth_range: (f32, f32),
     triangles: u64,
 }
@@ -181,8 +181,8 @@ impl Mesh {
                 }
             }
         }
-        let depth_range =
-            field.depths().iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &d| (l.min(d), h.max(d)));
+        // (Only the view's planning reads it.)
+        let depth_range = if view.is_some() { depth_range(field.depths()) } else { (0.0, 0.0) };
         let mut out = DisplacedBlocks {
             mesh,
             plan,
@@ -432,14 +432,8 @@ impl DisplacedBlocks<'_> {
         fine: &[f32],
         view: &DisplacementView,
     ) -> Option<ScreenBounds> {
-        let [a, b, c] = self.plan.triangles[t].map(|v| v as usize);
-        let m = self.mesh.as_ref();
-        let same = |x: usize| m.normals[x] == m.normals[a] && m.uv_scale[x] == m.uv_scale[a];
-        if !(same(b) && same(c)) {
-            return None;
-        }
-        let (lo, hi) = fine.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &d| (l.min(d), h.max(d)));
-        let down = m.normals[a] * (self.depth_scale * uv_unit_length(m.uv_scale[a]));
+        let down = self.flat_down(t)?;
+        let (lo, hi) = depth_range(fine);
         let mut out = ScreenBounds { min: Vec2::splat(f32::INFINITY), max: Vec2::splat(f32::NEG_INFINITY), min_z: 1.0 };
         for v in corners {
             let p = v.as_ref()?.position;
@@ -455,6 +449,16 @@ impl DisplacedBlocks<'_> {
         Some(out)
     }
 
+    /// For a flat input triangle `t` (one normal and one `uv_scale` at its three corners), the
+    /// world offset of the field's full depth (`normal * depth_scale * L`): a vertex of depth
+    /// `d` lies `d` times it below the undisplaced surface. `None` for a curved triangle.
+    fn flat_down(&self, t: usize) -> Option<Vec3> {
+        let [a, b, c] = self.plan.triangles[t].map(|v| v as usize);
+        let m = self.mesh.as_ref();
+        let same = |x: usize| m.normals[x] == m.normals[a] && m.uv_scale[x] == m.uv_scale[a];
+        (same(b) && same(c)).then(|| m.normals[a] * (self.depth_scale * uv_unit_length(m.uv_scale[a])))
+    }
+
     /// Whether an interior block of a flat input triangle (one normal and one `uv_scale` at its
     /// corners) lies wholly outside the view: its vertices are its undisplaced square moved
     /// along that normal by depths within the field's range, so they lie in the prism over the
@@ -462,14 +466,8 @@ impl DisplacedBlocks<'_> {
     /// all of its eight corners are beyond one plane of the view volume (clip space is affine
     /// in the world). `false` whenever it cannot tell.
     fn outside_view(&self, t: usize, corners: &[Option<super::displace::Blended>; 4], view: &DisplacementView) -> bool {
-        let [a, b, c] = self.plan.triangles[t].map(|v| v as usize);
-        let m = self.mesh.as_ref();
-        let same = |x: usize| m.normals[x] == m.normals[a] && m.uv_scale[x] == m.uv_scale[a];
-        if !(same(b) && same(c)) {
-            return false;
-        }
+        let Some(down) = self.flat_down(t) else { return false };
         let (lo, hi) = self.depth_range;
-        let down = m.normals[a] * (self.depth_scale * uv_unit_length(m.uv_scale[a]));
         // Per plane of the view volume, whether every corner is beyond it.
         let mut beyond = [true; 5];
         for v in corners {
@@ -494,6 +492,11 @@ impl DisplacedBlocks<'_> {
     pub fn screen_bounds(&self, index: usize) -> Option<ScreenBounds> {
         self.plans.get(index).and_then(|p| p.bounds)
     }
+}
+
+/// The least and the greatest of `depths`.
+fn depth_range(depths: &[f32]) -> (f32, f32) {
+    depths.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &d| (l.min(d), h.max(d)))
 }
 
 /// The largest input triangle (in parts a side) that [`coarsen_plan`] coarsens as a whole;
