@@ -312,6 +312,14 @@ impl DisplacedBlocks<'_> {
         let fine_block = BlockPlan { stride: 1, sides: [1; 4], bounds: None };
         let Some(view) = &self.view else { return fine_block };
         let k = BLOCK_CELLS;
+        // A triangle of fewer than `4k + 1` parts has no block strictly inside (that needs
+        // `i0, j0 >= k` and `i0 + j0 + 2k < n`): all of its blocks stay fine, and so may all
+        // of its sides, which only this triangle's blocks share. (The sphere of the demo is
+        // such triangles, tens of thousands of blocks whose planning would sample every grid
+        // point for nothing but the sides.)
+        if n <= 4 * k {
+            return fine_block;
+        }
         let whole = i1 == i0 + k && j1 == j0 + k;
         // A side coarsens when it is whole, inside the triangle and not on its edges; a block
         // when it is whole and strictly inside.
