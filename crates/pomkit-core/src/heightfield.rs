@@ -53,8 +53,14 @@ impl EdgeMode {
             return i as u32;
         }
         match self {
-            // `rem_euclid` handles any size, unlike Lengyel's power-of-two mask.
-            EdgeMode::Wrap => i.rem_euclid(i64::from(size)) as u32,
+            // A power-of-two size (the usual texture) wraps by a mask, which two's complement
+            // makes right for negative `i` too; any other by `rem_euclid`, in 32 bits when `i`
+            // fits (a 64-bit division costs several times a 32-bit one).
+            EdgeMode::Wrap if size.is_power_of_two() => (i & (i64::from(size) - 1)) as u32,
+            EdgeMode::Wrap => match (i32::try_from(i), i32::try_from(size)) {
+                (Ok(i), Ok(size)) => i.rem_euclid(size) as u32,
+                _ => i.rem_euclid(i64::from(size)) as u32,
+            },
             EdgeMode::Clamp => i.clamp(0, i64::from(size) - 1) as u32,
         }
     }
@@ -440,6 +446,18 @@ mod tests {
 
     fn ramp(w: u32, h: u32) -> HeightField {
         HeightField::from_height_fn(w, h, |x, y| (x + 2 * y) as f32 / (w + 2 * h) as f32)
+    }
+
+    #[test]
+    fn wrap_is_the_euclidean_remainder() {
+        for size in [1u32, 2, 3, 7, 512, 1000, 1 << 20, i32::MAX as u32, 1 << 31, u32::MAX] {
+            let far = [i64::MIN, i64::MIN + 1, -(1 << 40), i64::from(i32::MIN) - 1, i64::from(i32::MIN)];
+            let far2 = [i64::from(i32::MAX), i64::from(i32::MAX) + 1, i64::MAX - 1, i64::MAX];
+            for i in (-1100i64..1100).chain(far).chain(far2) {
+                let want = i.rem_euclid(i64::from(size)) as u32;
+                assert_eq!(EdgeMode::Wrap.resolve(i, size), want, "{i} {size}");
+            }
+        }
     }
 
     #[test]

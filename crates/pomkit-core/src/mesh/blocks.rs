@@ -502,6 +502,51 @@ impl DisplacedBlocks<'_> {
     }
 }
 
+/// Where a point of a fine triangle grid lies on a coarser one: on the coarse triangle with
+/// corners `at` (indices into the coarse grid's depths, listed row by row as `coarsen_plan`'s
+/// `grid` lists them), at `at[0] + (at[1] - at[0]) w[0] + (at[2] - at[0]) w[1]`.
+#[derive(Clone, Copy, Debug)]
+struct Lerp {
+    at: [u32; 3],
+    w: [f32; 2],
+}
+
+impl Lerp {
+    /// The coarse surface's depth at the point, of the coarse grid's `depths`.
+    fn of(&self, depths: &[f32]) -> f32 {
+        let [a, b, c] = self.at.map(|k| depths[k as usize]);
+        a + (b - a) * self.w[0] + (c - a) * self.w[1]
+    }
+}
+
+/// For every point `(i, j)` of an `n`-part triangle grid (row by row: `j` from 0, then `i`),
+/// the triangle of the `m`-part grid (`m < n`) over it and its weights there: cells split along
+/// the diagonal from `(1, 0)` to `(0, 1)`, and the points of the far edge in its last cells.
+fn coarse_lerps(n: u32, m: u32) -> Vec<Lerp> {
+    let row = |j: u32| j * (m + 1) - j * j.saturating_sub(1) / 2;
+    let at = |i: u32, j: u32| row(j) + i;
+    let mut out = Vec::with_capacity(((n + 1) * (n + 2) / 2) as usize);
+    for j in 0..=n {
+        for i in 0..=n - j {
+            let (x, y) = (f64::from(i) / f64::from(n) * f64::from(m), f64::from(j) / f64::from(n) * f64::from(m));
+            let (mut ci, mut cj) = (x.floor() as u32, y.floor() as u32);
+            // On the far edge: the last cell along it.
+            for _ in 0..2 {
+                if ci + cj >= m {
+                    if ci > 0 { ci -= 1 } else { cj -= 1 }
+                }
+            }
+            let (fx, fy) = ((x - f64::from(ci)) as f32, (y - f64::from(cj)) as f32);
+            out.push(if fx + fy <= 1.0 || ci + cj + 1 >= m {
+                Lerp { at: [at(ci, cj), at(ci + 1, cj), at(ci, cj + 1)], w: [fx, fy] }
+            } else {
+                Lerp { at: [at(ci + 1, cj + 1), at(ci, cj + 1), at(ci + 1, cj)], w: [1.0 - fx, 1.0 - fy] }
+            });
+        }
+    }
+    out
+}
+
 /// The least and the greatest of `depths`.
 fn depth_range(depths: &[f32]) -> (f32, f32) {
     depths.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &d| (l.min(d), h.max(d)))
@@ -564,6 +609,20 @@ fn coarsen_plan(
                 .unwrap_or(p)
         })
         .collect();
+    // Per part count n of a triangle coarsened whole, and per coarser grid it may take, where
+    // each of the fine grid's points falls in the coarse one (a function of n and m alone).
+    let mut tables: Vec<Vec<(u32, Vec<Lerp>)>> = vec![Vec::new(); COARSEN_WHOLE_PARTS as usize + 1];
+    for t in 0..plan.triangles.len() {
+        let n = plan.triangle_edges[t].iter().map(|&e| fine[e as usize]).max().unwrap_or(1);
+        if (2..=COARSEN_WHOLE_PARTS).contains(&n) && tables[n as usize].is_empty() {
+            tables[n as usize] = STRIDES
+                .into_iter()
+                .map(|s| n.div_ceil(s))
+                .filter(|&m| m < n)
+                .map(|m| (m, coarse_lerps(n, m)))
+                .collect();
+        }
+    }
     let triangle_n: Vec<u32> = (0..plan.triangles.len())
         .into_par_iter()
         .map(|t| {
@@ -581,46 +640,14 @@ fn coarsen_plan(
             let grid = |m: u32| -> Vec<f32> {
                 (0..=m).flat_map(|j| (0..=m - j).map(move |i| (i, j))).map(|(i, j)| at(i, j, m)).collect()
             };
-            let row = |j: u32, m: u32| (j * (m + 1) - j * j.saturating_sub(1) / 2) as usize;
             let fine_depths = grid(n);
-            let inside = STRIDES
-                .into_iter()
-                .map(|s| n.div_ceil(s))
-                .filter(|&m| m < n)
-                .find(|&m| {
-                    let ends = grid(m);
-                    let e = |i: u32, j: u32| ends[row(j, m) + i as usize];
-                    (0..=n).all(|j| {
-                        (0..=n - j).all(|i| {
-                            let (x, y) = (
-                                f64::from(i) / f64::from(n) * f64::from(m),
-                                f64::from(j) / f64::from(n) * f64::from(m),
-                            );
-                            let (mut ci, mut cj) = (x.floor() as u32, y.floor() as u32);
-                            if ci + cj >= m {
-                                // On the far edge: the last cell along it.
-                                if ci > 0 {
-                                    ci -= 1
-                                } else {
-                                    cj -= 1
-                                }
-                                if ci + cj >= m {
-                                    if ci > 0 { ci -= 1 } else { cj -= 1 }
-                                }
-                            }
-                            let (fx, fy) = ((x - f64::from(ci)) as f32, (y - f64::from(cj)) as f32);
-                            let coarse = if fx + fy <= 1.0 || ci + cj + 1 >= m {
-                                let f00 = e(ci, cj);
-                                f00 + (e(ci + 1, cj) - f00) * fx + (e(ci, cj + 1) - f00) * fy
-                            } else {
-                                let f11 = e(ci + 1, cj + 1);
-                                f11 + (e(ci, cj + 1) - f11) * (1.0 - fx) + (e(ci + 1, cj) - f11) * (1.0 - fy)
-                            };
-                            (fine_depths[row(j, n) + i as usize] - coarse).abs() * r <= tol
-                        })
-                    })
+            let inside = tables[n as usize]
+                .iter()
+                .find(|(m, lerps)| {
+                    let ends = grid(*m);
+                    lerps.iter().zip(&fine_depths).all(|(l, &d)| (d - l.of(&ends)).abs() * r <= tol)
                 })
-                .unwrap_or(n);
+                .map_or(n, |&(m, _)| m);
             inside.max(own)
         })
         .collect();
