@@ -356,7 +356,15 @@ impl Streamed<'_> {
         (sw, sh): (u32, u32),
         v: &mut BlockVertices,
     ) -> Option<(Vec2, Vec2, f32)> {
-        self.vertices(s, b, v);
+        // Positions only (the same bits as `vertices` makes): the varyings are not needed here.
+        self.streams[s].blocks.block_positions(b, &mut v.block);
+        v.clip.clear();
+        v.screen.clear();
+        for &p in &v.block.positions {
+            let clip = self.view.view_proj * p.extend(1.0);
+            v.clip.push(ClipVertex { clip, v: Varyings { world: p, ..Varyings::default() } });
+            v.screen.push(self.view.screen(clip));
+        }
         let mut lo = Vec2::splat(f32::INFINITY);
         let mut hi = Vec2::splat(f32::NEG_INFINITY);
         let mut min_z = f32::INFINITY;

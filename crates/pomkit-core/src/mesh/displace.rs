@@ -304,6 +304,7 @@ impl SubdivisionPlan {
     /// positions, normals, UVs, tangents and `uv_scale` interpolated from the triangle's corners
     /// (from the edge's two ends only for a point on an edge).
     /// `face` is the normal interior points fall back to ([`SubdivisionPlan::face`]).
+    #[inline]
     pub(super) fn blend(&self, mesh: &Mesh, t: usize, g: GridPoint, n: u32, face: Vec3) -> Blended {
         match g {
             GridPoint::Vertex(v) => {
@@ -448,6 +449,7 @@ fn push_triangle(indices: &mut Vec<u32>, t: [u32; 3]) {
 
 /// The vertex with barycentric weights `w` of `mesh`'s vertices `v`; its normal falls back to
 /// `fallback_normal` when the interpolated one is zero.
+#[inline]
 fn blend(mesh: &Mesh, v: [u32; 3], w: [f64; 3], fallback_normal: Vec3) -> Blended {
     let (mut p, mut n, mut uv, mut t, mut hand, mut s) =
         (DVec3::ZERO, DVec3::ZERO, DVec2::ZERO, DVec3::ZERO, 0.0f64, DVec2::ZERO);
