@@ -29,6 +29,7 @@ use glam::{Mat4, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::displace::{GridPoint, SubdivisionPlan, displace};
+use super::ranges::DepthRanges;
 use super::{MAX_DISPLACED_TRIANGLES, MIN_EDGE_TEXELS, Mesh, fix_tangent, uv_unit_length};
 use crate::heightfield::{EdgeMode, HeightField};
 use glam::DVec2;
@@ -92,6 +93,8 @@ pub struct DisplacedBlocks<'a> {
     plans: Vec<BlockPlan>,
     /// The field's least and greatest depth (with a view).
     depth_range: (f32, f32),
+    /// Depth bounds over boxes of UV (with a view).
+    ranges: Option<DepthRanges>,
     triangles: u64,
 }
 
@@ -193,6 +196,7 @@ impl Mesh {
             blocks,
             plans: Vec::new(),
             depth_range,
+            ranges: view.is_some().then(|| DepthRanges::new(field, edges)),
             triangles,
         };
         // Every block's strides, decided once (each is a function of the block alone).
@@ -359,20 +363,9 @@ impl DisplacedBlocks<'_> {
             let nowhere = ScreenBounds { min: Vec2::INFINITY, max: Vec2::NEG_INFINITY, min_z: 1.0 };
             return BlockPlan { stride: 1, sides: [1; 4], bounds: Some(nowhere) };
         }
-        // The field's depth at every grid point of the block inside the triangle (at the point's
-        // barycentric UV, in f32: a function of the point alone, as both blocks of a side need).
-        let width = (k + 1) as usize;
-        fine.clear();
-        fine.resize(width * width, 0.0);
         let [ua, ub, uc] = plan.triangles[t].map(|v| mesh.uvs[v as usize]);
         let inv = 1.0 / n as f32;
-        for j in j0..=j1 {
-            for i in i0..=i1.min(n - j) {
-                let uv = ua + (ub - ua) * (i as f32 * inv) + (uc - ua) * (j as f32 * inv);
-                fine[(j - j0) as usize * width + (i - i0) as usize] = self.field.sample_bilinear(uv, self.edges);
-            }
-        }
-        let f = |a: u32, b: u32| fine[b as usize * width + a as usize];
+        let uv_at = |i: u32, j: u32| ua + (ub - ua) * (i as f32 * inv) + (uc - ua) * (j as f32 * inv);
         // The projected length of the full depth at each corner, in samples.
         let reaches: [Option<f32>; 4] = blended.map(|v| {
             let v = v?;
@@ -380,6 +373,36 @@ impl DisplacedBlocks<'_> {
             Some(view.project(v.position)?.distance(view.project(v.position - down)?))
         });
         let tol = view.tolerance;
+        // A block whose relief is too shallow to see whole passes every test below at the
+        // coarsest stride: a grid point and the coarse surface over it (which interpolates
+        // other grid points) both lie within the depths of the texels under the block, so they
+        // differ by at most that range. Settled without sampling its grid (the pyramid's range
+        // holds every sample's; a margin covers the rounding of the interpolation).
+        if let (Some(ranges), true) = (self.ranges.as_ref(), block_ok) {
+            let corners = [(i0, j0), (i1, j0), (i0, j1), (i1, j1)].map(|(i, j)| uv_at(i, j));
+            let lo = corners.iter().fold(Vec2::INFINITY, |m, &c| m.min(c));
+            let hi = corners.iter().fold(Vec2::NEG_INFINITY, |m, &c| m.max(c));
+            let r = reaches.iter().try_fold(0.0f32, |m, r| r.map(|r| m.max(r)));
+            if let (Some((d0, d1)), Some(r)) = (ranges.over(lo, hi), r)
+                && (d1 - d0 + 1e-5) * r <= tol
+            {
+                let s = STRIDES[0];
+                let bounds = self.flat_bounds(t, &blended, (d0, d1), view);
+                return BlockPlan { stride: s, sides: [s; 4], bounds };
+            }
+        }
+        // The field's depth at every grid point of the block inside the triangle (at the point's
+        // barycentric UV, in f32: a function of the point alone, as both blocks of a side need).
+        let width = (k + 1) as usize;
+        fine.clear();
+        fine.resize(width * width, 0.0);
+        for j in j0..=j1 {
+            for i in i0..=i1.min(n - j) {
+                fine[(j - j0) as usize * width + (i - i0) as usize] =
+                    self.field.sample_bilinear(uv_at(i, j), self.edges);
+            }
+        }
+        let f = |a: u32, b: u32| fine[b as usize * width + a as usize];
         // Along a side: its points `at(0..=k)` against the straight lines between every s-th.
         let side = |ends: [usize; 2], at: &dyn Fn(u32) -> f32| -> u32 {
             let (Some(r0), Some(r1)) = (reaches[ends[0]], reaches[ends[1]]) else { return 1 };
@@ -412,7 +435,7 @@ impl DisplacedBlocks<'_> {
         if !block_ok {
             return BlockPlan { stride: 1, sides, bounds: None };
         }
-        let bounds = self.flat_bounds(t, &blended, fine, view);
+        let bounds = self.flat_bounds(t, &blended, depth_range(fine), view);
         let Some(r) = reaches.iter().try_fold(0.0f32, |m, r| r.map(|r| m.max(r))) else {
             return BlockPlan { stride: 1, sides, bounds };
         };
@@ -445,18 +468,17 @@ impl DisplacedBlocks<'_> {
 
     /// Where on screen an interior block of a flat input triangle (one normal and one
     /// `uv_scale` at its three corners) can be: its vertices are its undisplaced square moved
-    /// along that normal by the depths between the least and the most of its grid points'
-    /// (`fine`), so they lie in the prism over the square's `corners`, whose projection holds
-    /// theirs. `None` for a curved triangle or a prism reaching behind the near plane.
+    /// along that normal by depths within `(lo, hi)` (the least and the most of its grid
+    /// points', or bounds on them), so they lie in the prism over the square's `corners`, whose
+    /// projection holds theirs. `None` for a curved triangle or a prism reaching behind the near plane.
     fn flat_bounds(
         &self,
         t: usize,
         corners: &[Option<super::displace::Blended>; 4],
-        fine: &[f32],
+        (lo, hi): (f32, f32),
         view: &DisplacementView,
     ) -> Option<ScreenBounds> {
         let down = self.flat_down(t)?;
-        let (lo, hi) = depth_range(fine);
         let mut out = ScreenBounds { min: Vec2::splat(f32::INFINITY), max: Vec2::splat(f32::NEG_INFINITY), min_z: 1.0 };
         for v in corners {
             let p = v.as_ref()?.position;
@@ -508,12 +530,118 @@ impl DisplacedBlocks<'_> {
         beyond.contains(&true)
     }
 
-    /// Where block `index` can be on screen, when its plan for the view could tell without
-    /// making it (an interior block of a flat triangle, `flat_bounds`); the
-    /// caller adds a sample of margin for rounding.
+    /// Where block `index` can be on screen, when it can be told without making the block: from
+    /// its plan for the view (an interior block of a flat triangle, `flat_bounds`), else from
+    /// the prism that holds its vertices ([`DisplacedBlocks::prism_bounds`]). `None` without a
+    /// view, or where neither tells (a block reaching behind the near plane). The caller adds a
+    /// sample of margin for rounding.
     #[must_use]
     pub fn screen_bounds(&self, index: usize) -> Option<ScreenBounds> {
-        self.plans.get(index).and_then(|p| p.bounds)
+        self.plans.get(index).and_then(|p| p.bounds).or_else(|| self.prism_bounds(index))
+    }
+
+    /// Where block `index` of any input triangle, curved or flat, can be on screen, from a
+    /// prism that holds its displaced vertices, without making them.
+    ///
+    /// Over the input triangle, the undisplaced position `P`, the interpolated normal `N`
+    /// (before it is normalized) and `uv_scale` are affine functions of the grid coordinates
+    /// `(i, j)`. The block's grid points lie in a box of those coordinates: its cells, widened
+    /// where points on the input triangle's edges snap to an edge's own points. A vertex is
+    /// `P - N / |N| * d * depth_scale * L`, with `d` within the field's depth range and
+    /// `L = sqrt(sx * sy)` at most its value for the greatest `uv_scale` components at the box's
+    /// corners, so it is `P - s N` with `s` between 0 and `s_max = max(d) depth_scale L_max /
+    /// min |N|` (a lower bound on `|N|` over the box: its corners' least `N . c` for a unit
+    /// `c`). For a fixed `s` that is affine in `(i, j)`, and for fixed `(i, j)` affine in `s`,
+    /// so every vertex lies in the convex hull of the eight points `P - s N` at the box's
+    /// corners and `s` in `{0, s_max}`. A projection (all eight in front of the near plane)
+    /// keeps the hull's points within the eight points' screen box, and the least NDC depth of
+    /// the hull (a ratio of affine functions) is at one of them. `None` when a corner is behind
+    /// the near plane or not finite, or the normals or `uv_scale` of the triangle are
+    /// degenerate (zero or opposed normals, non-positive scales): the caller makes the block.
+    #[must_use]
+    pub fn prism_bounds(&self, index: usize) -> Option<ScreenBounds> {
+        let view = self.view.as_ref()?;
+        let &[t, i0, j0] = self.blocks.get(index)?;
+        let (mesh, plan, t) = (self.mesh.as_ref(), &self.plan, t as usize);
+        let n = plan.triangle_parts(t);
+        let (i1, j1) = ((i0 + BLOCK_CELLS).min(n), (j0 + BLOCK_CELLS).min(n));
+        let [ab, ac, bc] = plan.triangle_edges[t];
+        // Grid coordinate (in the triangle's n parts) of edge point k of n, snapped to the
+        // edge's own parts, as `SubdivisionPlan::grid_point` snaps it.
+        let snapped = |e: u32, k: u32| -> f64 {
+            let parts = u64::from(plan.parts[e as usize]);
+            let kk = (2 * u64::from(k) * parts + u64::from(n)) / (2 * u64::from(n));
+            kk.min(parts) as f64 * f64::from(n) / parts as f64
+        };
+        let (mut ilo, mut ihi, mut jlo, mut jhi) = (f64::from(i0), f64::from(i1), f64::from(j0), f64::from(j1));
+        if j0 == 0 {
+            // Points (i, 0) on edge ab.
+            ilo = ilo.min(snapped(ab, i0));
+            ihi = ihi.max(snapped(ab, i1.min(n)));
+        }
+        if i0 == 0 {
+            // Points (0, j) on edge ac.
+            jlo = jlo.min(snapped(ac, j0));
+            jhi = jhi.max(snapped(ac, j1.min(n)));
+        }
+        // Points (n - j, j) on edge bc, for the rows where it crosses the block.
+        let (ja, jb) = (j0.max(n.saturating_sub(i1)), j1.min(n - i0.min(n)));
+        if ja <= jb {
+            for j in [ja, jb] {
+                let jj = snapped(bc, j);
+                (jlo, jhi) = (jlo.min(jj), jhi.max(jj));
+                (ilo, ihi) = (ilo.min(f64::from(n) - jj), ihi.max(f64::from(n) - jj));
+            }
+        }
+        // A hair wider, for the rounding of the blends.
+        let pad = 1e-3;
+        let (ilo, ihi, jlo, jhi) = (ilo - pad, ihi + pad, jlo - pad, jhi + pad);
+        let vs = plan.triangles[t].map(|v| v as usize);
+        if vs.iter().any(|&v| !(mesh.uv_scale[v].cmpgt(Vec2::ZERO).all() && mesh.uv_scale[v].is_finite())) {
+            return None;
+        }
+        let nf = f64::from(n);
+        let corners = [(ilo, jlo), (ihi, jlo), (ilo, jhi), (ihi, jhi)].map(|(i, j)| {
+            let w = [(nf - i - j) / nf, i / nf, j / nf];
+            let mut p = glam::DVec3::ZERO;
+            let mut nn = glam::DVec3::ZERO;
+            let mut sc = DVec2::ZERO;
+            let mut uv = DVec2::ZERO;
+            for (&v, &w) in vs.iter().zip(&w) {
+                p += mesh.positions[v].as_dvec3() * w;
+                nn += mesh.normals[v].as_dvec3() * w;
+                sc += mesh.uv_scale[v].as_dvec2() * w;
+                uv += mesh.uvs[v].as_dvec2() * w;
+            }
+            (p, nn, sc, uv.as_vec2())
+        });
+        let c = corners.iter().fold(glam::DVec3::ZERO, |a, k| a + k.1).try_normalize()?;
+        let n_min = corners.iter().map(|k| k.1.dot(c)).fold(f64::INFINITY, f64::min);
+        let s_max = corners.iter().fold(DVec2::ZERO, |m, k| m.max(k.2));
+        if !(n_min > 0.05 && s_max.is_finite()) {
+            return None;
+        }
+        // The depths of the texels under the block's box of UV (the field's, failing that).
+        let uv_lo = corners.iter().fold(Vec2::INFINITY, |m, k| m.min(k.3));
+        let uv_hi = corners.iter().fold(Vec2::NEG_INFINITY, |m, k| m.max(k.3));
+        let (d_min, d_max) = self.ranges.as_ref().and_then(|r| r.over(uv_lo, uv_hi)).unwrap_or(self.depth_range);
+        let per_depth = f64::from(self.depth_scale) * s_max.x.sqrt() * s_max.y.sqrt() / n_min * (1.0 + 1e-4);
+        let reach = [f64::from(d_min.min(0.0)) * per_depth, f64::from(d_max.max(0.0)) * per_depth];
+        let mut out = ScreenBounds { min: Vec2::splat(f32::INFINITY), max: Vec2::splat(f32::NEG_INFINITY), min_z: 1.0 };
+        for (p, nn, _, _) in corners {
+            for s in reach {
+                let q = (p - nn * s).as_vec3();
+                let clip = view.view_proj * q.extend(1.0);
+                if !(clip.is_finite() && clip.w > 1e-6 && clip.z >= 0.0) {
+                    return None;
+                }
+                let at = view.screen(clip);
+                out.min = out.min.min(at);
+                out.max = out.max.max(at);
+                out.min_z = out.min_z.min(clip.z / clip.w);
+            }
+        }
+        Some(out)
     }
 }
 
@@ -527,9 +655,9 @@ struct Lerp {
 }
 
 impl Lerp {
-    /// The coarse surface's depth at the point, of the coarse grid's `depths`.
-    fn of(&self, depths: &[f32]) -> f32 {
-        let [a, b, c] = self.at.map(|k| depths[k as usize]);
+    /// The coarse surface's depth at the point, `depth(k)` giving the coarse grid's `k`-th.
+    fn of(&self, mut depth: impl FnMut(usize) -> f32) -> f32 {
+        let [a, b, c] = self.at.map(|k| depth(k as usize));
         a + (b - a) * self.w[0] + (c - a) * self.w[1]
     }
 }
@@ -638,6 +766,10 @@ fn coarsen_plan(
                 .collect();
         }
     }
+    // Each grid's points (i, j), row by row, as the tables list them.
+    let points: Vec<Vec<[u8; 2]>> = (0..=COARSEN_WHOLE_PARTS)
+        .map(|m| (0..=m).flat_map(|j| (0..=m - j).map(move |i| [i as u8, j as u8])).collect())
+        .collect();
     let triangle_n: Vec<u32> = (0..plan.triangles.len())
         .into_par_iter()
         .map(|t| {
@@ -652,15 +784,24 @@ fn coarsen_plan(
                 let m = f64::from(m);
                 depth(ua * ((m - f64::from(i) - f64::from(j)) / m) + ub * (f64::from(i) / m) + uc * (f64::from(j) / m))
             };
-            let grid = |m: u32| -> Vec<f32> {
-                (0..=m).flat_map(|j| (0..=m - j).map(move |i| (i, j))).map(|(i, j)| at(i, j, m)).collect()
+            // The grids' depths, sampled when first read (NaN: not yet): a grid that does not
+            // fit usually fails within its first few points.
+            let lazy = |cache: &mut Vec<f32>, k: usize, m: u32| -> f32 {
+                if cache[k].is_nan() {
+                    let [i, j] = points[m as usize][k];
+                    cache[k] = at(u32::from(i), u32::from(j), m);
+                }
+                cache[k]
             };
-            let fine_depths = grid(n);
+            let mut fine_depths = vec![f32::NAN; points[n as usize].len()];
             let inside = tables[n as usize]
                 .iter()
                 .find(|(m, lerps)| {
-                    let ends = grid(*m);
-                    lerps.iter().zip(&fine_depths).all(|(l, &d)| (d - l.of(&ends)).abs() * r <= tol)
+                    let mut ends = vec![f32::NAN; points[*m as usize].len()];
+                    lerps.iter().enumerate().all(|(k, l)| {
+                        let d = lazy(&mut fine_depths, k, n);
+                        (d - l.of(|q| lazy(&mut ends, q, *m))).abs() * r <= tol
+                    })
                 })
                 .map_or(n, |&(m, _)| m);
             inside.max(own)
@@ -900,6 +1041,46 @@ mod tests {
             }
         }
         assert!(known as f64 > 0.5 * blocks.len() as f64, "{known} of {} blocks", blocks.len());
+    }
+
+    /// Every block's known screen bounds (planned, or from its prism) hold every vertex it
+    /// makes, and its least depth is no deeper than theirs, for the demo's four objects (a
+    /// plane reaching behind the camera, a rotated cube, a UV sphere whose triangles all touch
+    /// their edges, a tilted quad) seen by its camera.
+    #[test]
+    fn screen_bounds_hold_every_vertex_on_the_demo_objects() {
+        let scene = crate::demo::demo_scene_sized(256);
+        let size = Vec2::new(640.0, 360.0);
+        let view_proj = scene.camera.projection(size.x / size.y) * scene.camera.view();
+        let view = DisplacementView { view_proj, size, tolerance: 0.125 };
+        let mut b = DisplacedBlock::default();
+        for obj in &scene.objects {
+            let material = &scene.materials[obj.material];
+            let field = material.height.as_deref().unwrap();
+            let world = obj.mesh.transformed(obj.transform);
+            let blocks = world.displaced_blocks(field, material.edges, material.depth_scale, 1.0, Some(view));
+            let mut known = 0;
+            for i in 0..blocks.len() {
+                let Some(bounds) = blocks.screen_bounds(i) else { continue };
+                known += 1;
+                blocks.block(i, &mut b);
+                for &p in &b.positions {
+                    let clip = view.view_proj * p.extend(1.0);
+                    if !bounds.min.is_finite() {
+                        // Planned out of view: beyond one plane of it.
+                        continue;
+                    }
+                    let s = view.project(p).unwrap();
+                    assert!(
+                        s.cmpge(bounds.min - 1e-3).all() && s.cmple(bounds.max + 1e-3).all(),
+                        "{}: block {i}: {s} not in {bounds:?}",
+                        obj.name
+                    );
+                    assert!(clip.z / clip.w >= bounds.min_z - 1e-6, "{}: block {i}", obj.name);
+                }
+            }
+            assert!(known as f64 > 0.5 * blocks.len() as f64, "{}: {known} of {} blocks", obj.name, blocks.len());
+        }
     }
 
     #[test]

@@ -39,6 +39,7 @@ use thiserror::Error;
 
 mod blocks;
 mod displace;
+mod ranges;
 
 pub use blocks::{BLOCK_CELLS, DisplacedBlock, DisplacedBlocks, DisplacementView, ScreenBounds};
 mod shapes;
