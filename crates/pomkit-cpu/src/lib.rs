@@ -97,6 +97,9 @@ fn sample_albedo(chain: &[Texture], uv: Vec2, lod: f32, edges: EdgeMode) -> Vec3
 pub struct CpuRenderer {
     simd: Simd8,
     albedo: AlbedoCache,
+    /// Occlusion and back-face culling of the displaced reference's blocks
+    /// ([`CpuRenderer::with_block_culling`]).
+    cull_blocks: bool,
 }
 
 impl Default for CpuRenderer {
@@ -121,13 +124,23 @@ impl CpuRenderer {
     /// [`Simd8::from_env`] itself).
     #[must_use]
     pub fn new() -> Self {
-        Self { simd: Simd8::from_env().unwrap_or_else(|_| Simd8::detect()), albedo: AlbedoCache::default() }
+        Self::with_simd(Simd8::from_env().unwrap_or_else(|_| Simd8::detect()))
     }
 
     /// A renderer shading its packets with `simd`.
     #[must_use]
     pub fn with_simd(simd: Simd8) -> Self {
-        Self { simd, albedo: AlbedoCache::default() }
+        Self { simd, albedo: AlbedoCache::default(), cull_blocks: true }
+    }
+
+    /// Whether the `displaced` reference skips, without making them, the blocks that what a
+    /// tile already drew hides, and the triangles that clearly face away (on by default). Off,
+    /// every block binned to a tile is made and every triangle set up: the same picture, bit
+    /// for bit, only slower (the tests compare the two).
+    #[must_use]
+    pub fn with_block_culling(mut self, on: bool) -> Self {
+        self.cull_blocks = on;
+        self
     }
 
     /// The SIMD level the renderer shades with.
@@ -203,6 +216,7 @@ impl CpuRenderer {
                         .iter()
                         .all(|p| !(silhouettes(p) || p.material.pixel_depth_offset && p.technique.displaces())),
                 lod_tint: opts.lod_tint,
+                cull_blocks: self.cull_blocks,
                 depth_matrix: scene.camera.projection(1.0) * scene.camera.view(),
             },
             progress,
@@ -292,6 +306,10 @@ struct Streamed<'a> {
     view: DisplacementView,
 }
 
+/// The samples a streamed block may cover, `[x0, y0, x1, y1]` (end exclusive), and its least
+/// NDC depth.
+type BlockSamples = ([u32; 4], f32);
+
 /// A block's vertices after the vertex stage, reused from block to block.
 #[derive(Default)]
 struct BlockVertices {
@@ -299,6 +317,9 @@ struct BlockVertices {
     clip: Vec<ClipVertex>,
     /// Screen positions (samples) of the vertices in front of the near plane.
     screen: Vec<Vec2>,
+    /// Per vertex, whether it is in front of the near plane and inside the guard band
+    /// ([`raster::unclipped`]).
+    unclipped: Vec<bool>,
 }
 
 impl Streamed<'_> {
@@ -310,6 +331,7 @@ impl Streamed<'_> {
         let blk = &out.block;
         out.clip.clear();
         out.screen.clear();
+        out.unclipped.clear();
         for i in 0..blk.positions.len() {
             let p = blk.positions[i];
             let clip = self.view.view_proj * p.extend(1.0);
@@ -326,6 +348,7 @@ impl Streamed<'_> {
                 },
             });
             out.screen.push(self.view.screen(clip));
+            out.unclipped.push(raster::unclipped(clip));
         }
     }
 
@@ -698,18 +721,24 @@ fn shade_bands(
             bin(b, t.min_z, Item::Triangle(i as u32));
         }
     }
-    // Each block of the streamed objects is made once here for its bounds, and again in each
-    // tile it touches.
+    // Each block of the streamed objects is bounded here (from its prism where it can be, else
+    // by making it), and made in each tile it touches unless what the tile drew already hides
+    // it: per stream and block, the samples it may cover and its least depth.
+    // (`f32::INFINITY` for a block that covers none.)
+    let mut rects: Vec<Vec<BlockSamples>> = Vec::with_capacity(streamed.streams.len());
     for (si, stream) in streamed.streams.iter().enumerate() {
         let bounds: Vec<Option<([u32; 4], f32)>> = (0..stream.blocks.len())
             .into_par_iter()
             .map_init(BlockVertices::default, |v, b| streamed.bounds(si, b, (sw, sh), v))
             .collect();
+        let mut stream_rects = Vec::with_capacity(bounds.len());
         for (b, found) in bounds.into_iter().enumerate() {
             if let Some(([x0, y0, x1, y1], z)) = found {
                 bin((x0, y0, x1, y1), z, Item::Block(si as u32, b as u32));
             }
+            stream_rects.push(found.unwrap_or(([0; 4], f32::INFINITY)));
         }
+        rects.push(stream_rects);
     }
     // Front to back, so the early depth test rejects hidden fragments before they are traced.
     bins.par_iter_mut().for_each(|b| b.sort_by(|a, c| a.0.total_cmp(&c.0)));
@@ -760,7 +789,7 @@ fn shade_bands(
                     let buf = shade_tile(
                         scene,
                         prepared,
-                        (tris, streamed),
+                        (tris, streamed, &rects),
                         &bins[(by * tx + bx) as usize],
                         [bx * tile_w, by * TILE, ((bx + 1) * tile_w).min(sw), ((by + 1) * TILE).min(sh)],
                         (sw, sh),
@@ -796,7 +825,7 @@ enum Item {
 fn shade_tile(
     scene: &Scene,
     prepared: &[Prepared],
-    (tris, streamed): (&[ScreenTriangle], &Streamed<'_>),
+    (tris, streamed, rects): (&[ScreenTriangle], &Streamed<'_>, &[Vec<BlockSamples>]),
     bin: &[(f32, Item)],
     [x0, y0, x1, y1]: [u32; 4],
     (sw, sh): (u32, u32),
@@ -809,9 +838,9 @@ fn shade_tile(
     let mut visible = if shading.visibility_first { Visible::new(buf.len()) } else { Visible::default() };
     // One packet for the tile, emptied after each triangle.
     let mut packet = Packet::default();
-    let mut draw = |tri: &ScreenTriangle, buf: &mut Vec<Option<Sample>>| {
+    let mut draw = |tri: &ScreenTriangle, buf: &mut Vec<Option<Sample>>, visible: &mut Visible| {
         if shading.visibility_first {
-            draw_visible(tri, (x0, y0, x1, y1), &mut visible);
+            draw_visible(tri, (x0, y0, x1, y1), visible);
         } else {
             draw(scene, prepared, tri, (x0, y0, x1, y1), shading, &mut packet, buf);
         }
@@ -819,18 +848,34 @@ fn shade_tile(
     let mut block = BlockVertices::default();
     for &(_, item) in bin {
         match item {
-            Item::Triangle(ti) => draw(&tris[ti as usize], &mut buf),
+            Item::Triangle(ti) => draw(&tris[ti as usize], &mut buf, &mut visible),
             Item::Block(si, b) => {
+                // Occlusion culling: a block behind what the tile holds is not made at all.
+                let (rect, min_z) = rects[si as usize][b as usize];
+                let tile = [x0, y0, x1, y1];
+                let hidden = if !shading.cull_blocks {
+                    false
+                } else if shading.visibility_first {
+                    occluded(rect, min_z, tile, |at, z| {
+                        let (object, near) = visible.nearest[at];
+                        object != Visible::EMPTY && near <= z
+                    })
+                } else {
+                    occluded(rect, min_z, tile, |at, z| buf[at].is_some_and(|s| s.z <= z))
+                };
+                if hidden {
+                    continue;
+                }
                 streamed.vertices(si as usize, b as usize, &mut block);
                 let object = streamed.streams[si as usize].object;
                 // Pixel centres a triangle can cover lie within its vertices' extent.
                 let (fx0, fy0, fx1, fy1) = (x0 as f32 - 1.0, y0 as f32 - 1.0, x1 as f32 + 1.0, y1 as f32 + 1.0);
                 for tri in &block.block.triangles {
-                    let t = tri.map(|k| block.clip[k as usize]);
-                    if needs_clipping(&t) {
+                    if !tri.iter().all(|&k| block.unclipped[k as usize]) {
+                        let t = tri.map(|k| block.clip[k as usize]);
                         for c in clip_near(t) {
                             if let Some(st) = setup(&c, sw, sh, object, true) {
-                                draw(&st, &mut buf);
+                                draw(&st, &mut buf, &mut visible);
                             }
                         }
                         continue;
@@ -840,8 +885,12 @@ fn shade_tile(
                     if hi.x < fx0 || lo.x > fx1 || hi.y < fy0 || lo.y > fy1 || !holds_a_centre(lo, hi) {
                         continue;
                     }
+                    if shading.cull_blocks && surely_back_facing(a, b, c) {
+                        continue;
+                    }
+                    let t = tri.map(|k| block.clip[k as usize]);
                     if let Some(st) = setup(&t, sw, sh, object, true) {
-                        draw(&st, &mut buf);
+                        draw(&st, &mut buf, &mut visible);
                     }
                 }
             }
@@ -853,6 +902,29 @@ fn shade_tile(
     visible.give_back();
     buf
 }
+
+/// Whether every sample of `rect` (a block's samples, end exclusive) inside the tile
+/// `[x0, x1) x [y0, y1)` already holds a fragment at depth `z` or nearer (`holds(at, z)`, `at`
+/// the sample's index in the tile), `z` being `min_z` (the least depth of anything in the
+/// block) less [`Z_MARGIN`]: then every fragment of the block fails the depth test (a fragment
+/// is kept only when strictly nearer) and the block need not be made.
+fn occluded(rect: [u32; 4], min_z: f32, [x0, y0, x1, y1]: [u32; 4], holds: impl Fn(usize, f32) -> bool) -> bool {
+    let (rx0, ry0, rx1, ry1) = (rect[0].max(x0), rect[1].max(y0), rect[2].min(x1), rect[3].min(y1));
+    if !(min_z.is_finite() && rx0 < rx1 && ry0 < ry1) {
+        return false;
+    }
+    let z = min_z - Z_MARGIN;
+    let tw = (x1 - x0) as usize;
+    (ry0..ry1).all(|y| {
+        let row = (y - y0) as usize * tw;
+        (rx0..rx1).all(|x| holds(row + (x - x0) as usize, z))
+    })
+}
+
+/// How far below a block's least vertex depth (NDC, in `[0, 1]`) [`occluded`] looks: a
+/// fragment's depth, interpolated in f32 from its triangle's vertices, can fall an ulp or two
+/// below the least of them.
+const Z_MARGIN: f32 = 1e-6;
 
 /// What a tile's visibility pass finds: per sample the object and depth of its nearest fragment
 /// so far (`EMPTY`: none), and the fragment itself (in a buffer of this thread's, reused from
@@ -890,6 +962,22 @@ impl Visible {
         let (object, _) = self.nearest[at];
         (object != Self::EMPTY).then(|| (object, &self.frags[at]))
     }
+}
+
+/// Whether the triangle with screen positions `a`, `b`, `c` (samples, y down, in f32, as
+/// [`DisplacementView::screen`] gives them) faces away so clearly that [`setup`], which decides
+/// on the positions computed in f64 and snapped to 1/256 sample, culls it too. For positions
+/// within `[-64, 4096)` (else it does not tell) the two differ by less than `D = 1/512 + 1/256`
+/// sample per coordinate (the snap, and a few roundings of f32 below 4096), which changes twice
+/// the signed area by at most `2 D (|b - a|_1 + |c - a|_1) + 8 D^2`: the margin is larger.
+fn surely_back_facing(a: Vec2, b: Vec2, c: Vec2) -> bool {
+    let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+    if !(lo.cmpge(Vec2::splat(-64.0)).all() && hi.cmplt(Vec2::splat(4096.0)).all()) {
+        return false;
+    }
+    let (e1, e2) = (b - a, c - a);
+    let margin = 0.05 * (e1.abs().element_sum() + e2.abs().element_sum()) + 0.01;
+    e1.perp_dot(e2) > margin
 }
 
 /// Whether the box `[lo, hi]` of a triangle's screen positions (samples, in f32) may hold a
@@ -1111,6 +1199,9 @@ struct Shading {
     /// silhouettes): each tile finds its visible fragments first and shades only those.
     visibility_first: bool,
     lod_tint: bool,
+    /// Occlusion culling of streamed blocks and back-face culling of their triangles before
+    /// set-up ([`CpuRenderer::with_block_culling`]).
+    cull_blocks: bool,
     /// The camera's view-projection at aspect 1, for the pixel depth offset (NDC depth does not
     /// depend on the aspect).
     depth_matrix: Mat4,
@@ -1561,6 +1652,69 @@ mod tests {
             bytes += a.uv.len() * 8 + (a.depth.len() + a.shadow.len() + a.fetches.len() + a.lod.len()) * 4;
         }
         bytes as u64
+    }
+
+    /// Every triangle `surely_back_facing` rejects, `setup` culls too: small and long
+    /// triangles, nearly degenerate ones whose winding only the snap decides, anywhere on a
+    /// 1280x720 frame and beyond its edges, at random depths.
+    #[test]
+    fn what_surely_faces_away_setup_culls() {
+        let view = DisplacementView { view_proj: Mat4::IDENTITY, size: Vec2::new(1280.0, 720.0), tolerance: 0.125 };
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rand = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (mut rejected, mut back) = (0, 0);
+        for k in 0..200_000 {
+            let w = 0.2 + 5.0 * rand();
+            let centre = Vec2::new(rand() * 2.4 - 1.2, rand() * 2.4 - 1.2);
+            // Sizes from a tenth of a sample to a few hundred samples.
+            let reach = 10f32.powf(rand() * 3.5 - 1.0) / 640.0;
+            let mut corner = || {
+                let p = centre + (Vec2::new(rand(), rand()) - 0.5) * reach;
+                Vec4::new(p.x * w, p.y * w, rand() * w, w)
+            };
+            let mut clip = [corner(), corner(), corner()];
+            if k % 4 == 0 {
+                // Nearly on a line: the third corner close to the middle of the other two.
+                let mid = (clip[0] + clip[1]) * 0.5;
+                clip[2] = mid + Vec4::new(rand() - 0.5, rand() - 0.5, 0.0, 0.0) * (reach * w * 1e-3);
+            }
+            let [a, b, c] = clip.map(|c| view.screen(c));
+            let tri = clip.map(|clip| ClipVertex { clip, v: Varyings::default() });
+            let culled = setup(&tri, 1280, 720, 0, true).is_none();
+            back += usize::from(culled);
+            if surely_back_facing(a, b, c) {
+                rejected += 1;
+                assert!(culled, "{clip:?}: surely facing away, yet set up");
+            }
+        }
+        // About half face away (and some are degenerate or off the frame, which it leaves to
+        // setup): the test is not vacuous.
+        assert!(rejected > back / 3, "{rejected} of {back} culled triangles rejected");
+    }
+
+    /// A block is hidden only when every sample it may cover, inside the tile, holds something
+    /// at least `Z_MARGIN` nearer than its least depth.
+    #[test]
+    fn a_block_is_occluded_only_behind_a_full_cover() {
+        let tile = [10, 20, 18, 24];
+        let depth = |x: u32, y: u32| if (x, y) == (15, 22) { 0.5 } else { 0.3 };
+        let at = |i: usize| (10 + (i % 8) as u32, 20 + (i / 8) as u32);
+        let holds = |i: usize, z: f32| {
+            let (x, y) = at(i);
+            depth(x, y) <= z
+        };
+        // Reaching past the tile does not matter: only its own samples are read.
+        assert!(occluded([0, 0, 15, 100], 0.4, tile, holds));
+        assert!(!occluded([0, 0, 16, 100], 0.4, tile, holds), "the sample at depth 0.5 is not nearer");
+        assert!(occluded([0, 0, 16, 100], 0.6, tile, holds));
+        assert!(!occluded([0, 0, 15, 100], 0.3, tile, holds), "equal depths within the margin do not hide");
+        assert!(!occluded([0, 0, 15, 100], f32::INFINITY, tile, holds), "a block that covers nothing is not tested");
+        assert!(!occluded([30, 0, 40, 100], 0.9, tile, holds), "no sample in the tile: drawn as binned");
     }
 
     #[test]

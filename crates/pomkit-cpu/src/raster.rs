@@ -166,11 +166,14 @@ fn in_front(c: Vec4) -> bool {
 /// beyond the guard band. A triangle that needs no clipping can go to [`setup`] as it is.
 #[must_use]
 pub fn needs_clipping(tri: &[ClipVertex; 3]) -> bool {
-    let guard = |c: Vec4| {
-        let g = GUARD_NDC * f64::from(c.w);
-        f64::from(c.x).abs() <= g && f64::from(c.y).abs() <= g
-    };
-    !tri.iter().all(|c| in_front(c.clip) && guard(c.clip))
+    !tri.iter().all(|c| unclipped(c.clip))
+}
+
+/// Whether a vertex at clip position `c` lies in front of the near plane and inside the guard
+/// band: a triangle needs clipping ([`needs_clipping`]) unless all three of its vertices do.
+pub fn unclipped(c: Vec4) -> bool {
+    let g = GUARD_NDC * f64::from(c.w);
+    in_front(c) && f64::from(c.x).abs() <= g && f64::from(c.y).abs() <= g
 }
 
 /// The point where edge `a`-`b` crosses the plane `dist = 0`, the same whichever way round the
