@@ -24,6 +24,7 @@
 //! stitching between input triangles as it is without a view.
 
 use std::borrow::Cow;
+use std::sync::OnceLock;
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -89,8 +90,10 @@ pub struct DisplacedBlocks<'a> {
     view: Option<DisplacementView>,
     /// Per block: the triangle, and the first grid column and row of its cells.
     blocks: Vec<[u32; 3]>,
-    /// Per block with a view: its strides and maybe its screen bounds (empty without a view).
-    plans: Vec<BlockPlan>,
+    /// Per block with a view: its strides and maybe its screen bounds (empty without a view);
+    /// planned up front, except the blocks of flat triangles facing away, which are planned
+    /// when first made (they are seldom drawn: the back of a closed object).
+    plans: Vec<OnceLock<BlockPlan>>,
     /// The field's least and greatest depth (with a view).
     depth_range: (f32, f32),
     /// Depth bounds over boxes of UV (with a view).
@@ -199,17 +202,15 @@ impl Mesh {
             ranges: view.is_some().then(|| DepthRanges::new(field, edges)),
             triangles,
         };
-        // Every block's strides, decided once (each is a function of the block alone).
-        if out.view.is_some() {
-            let plans: Vec<BlockPlan> = (0..out.blocks.len())
+        // Every block's strides, decided once (each is a function of the block alone, so the
+        // blocks sharing a side agree whenever each is planned).
+        if let Some(view) = out.view {
+            let away: Vec<bool> = (0..out.plan.triangles.len()).map(|t| out.faces_away(t, &view)).collect();
+            let plans: Vec<OnceLock<BlockPlan>> = (0..out.blocks.len())
                 .into_par_iter()
                 .map_init(Vec::new, |fine, b| {
-                    let [t, i0, j0] = out.blocks[b];
-                    let t = t as usize;
-                    let n = out.plan.triangle_parts(t);
-                    let face = out.plan.face(&out.mesh, t);
-                    let (i1, j1) = ((i0 + BLOCK_CELLS).min(n), (j0 + BLOCK_CELLS).min(n));
-                    out.strides(t, [i0, j0, i1, j1], n, face, fine)
+                    let t = out.blocks[b][0] as usize;
+                    if away[t] { OnceLock::new() } else { OnceLock::from(out.plan_block(b, fine)) }
                 })
                 .collect();
             out.plans = plans;
@@ -267,7 +268,7 @@ impl DisplacedBlocks<'_> {
         let n = plan.triangle_parts(t);
         let face = plan.face(mesh, t);
         let (i1, j1) = ((i0 + BLOCK_CELLS).min(n), (j0 + BLOCK_CELLS).min(n));
-        let (s, sides) = self.plans.get(index).map_or((1, [1; 4]), |p| (p.stride, p.sides));
+        let (s, sides) = self.plan_of(index).map_or((1, [1; 4]), |p| (p.stride, p.sides));
         out.stride = s;
         let width = (BLOCK_CELLS + 1) as usize;
         out.slots.resize(width * width, (u32::MAX, GridPoint::Vertex(u32::MAX)));
@@ -537,7 +538,40 @@ impl DisplacedBlocks<'_> {
     /// sample of margin for rounding.
     #[must_use]
     pub fn screen_bounds(&self, index: usize) -> Option<ScreenBounds> {
-        self.plans.get(index).and_then(|p| p.bounds).or_else(|| self.prism_bounds(index))
+        self.plans.get(index).and_then(|p| p.get()).and_then(|p| p.bounds).or_else(|| self.prism_bounds(index))
+    }
+
+    /// Block `index`'s plan for the view (`None` without one), planned now if it was not yet.
+    fn plan_of(&self, index: usize) -> Option<&BlockPlan> {
+        let cell = self.plans.get(index)?;
+        Some(cell.get_or_init(|| self.plan_block(index, &mut Vec::new())))
+    }
+
+    /// Plans block `index` ([`DisplacedBlocks::strides`]); `fine` is scratch.
+    fn plan_block(&self, index: usize, fine: &mut Vec<f32>) -> BlockPlan {
+        let [t, i0, j0] = self.blocks[index];
+        let t = t as usize;
+        let n = self.plan.triangle_parts(t);
+        let face = self.plan.face(&self.mesh, t);
+        let (i1, j1) = ((i0 + BLOCK_CELLS).min(n), (j0 + BLOCK_CELLS).min(n));
+        self.strides(t, [i0, j0, i1, j1], n, face, fine)
+    }
+
+    /// Whether the plane of flat input triangle `t` faces away from the eye of `view` (the
+    /// orientation of its corners' homogeneous `(x, y, w)` in clip space, which needs no
+    /// clipping: Olano and Greer's 2D homogeneous rasterization). Only when to plan its blocks
+    /// depends on it.
+    fn faces_away(&self, t: usize, view: &DisplacementView) -> bool {
+        if self.flat_down(t).is_none() {
+            return false;
+        }
+        let [a, b, c] = self.plan.triangles[t].map(|v| {
+            let q = view.view_proj * self.mesh.positions[v as usize].extend(1.0);
+            glam::DVec3::new(f64::from(q.x), f64::from(q.y), f64::from(q.w))
+        });
+        // In front of the eye, this is w_a w_b w_c times twice the signed area in NDC (y up),
+        // positive for a front face (counter-clockwise seen from the eye).
+        a.dot(b.cross(c)) < 0.0
     }
 
     /// Where block `index` of any input triangle, curved or flat, can be on screen, from a
@@ -1080,6 +1114,37 @@ mod tests {
                 }
             }
             assert!(known as f64 > 0.5 * blocks.len() as f64, "{}: {known} of {} blocks", obj.name, blocks.len());
+        }
+    }
+
+    /// The flat triangles planned late are the ones whose corners wind clockwise on screen
+    /// (the cube's three faces turned away from the demo's camera), and planning them late
+    /// gives the plans planning them first does.
+    #[test]
+    fn triangles_facing_away_are_planned_late_and_alike() {
+        let scene = crate::demo::demo_scene_sized(64);
+        let cube = &scene.objects[1];
+        let material = &scene.materials[cube.material];
+        let field = material.height.as_deref().unwrap();
+        let size = Vec2::new(320.0, 180.0);
+        let view_proj = scene.camera.projection(size.x / size.y) * scene.camera.view();
+        let view = DisplacementView { view_proj, size, tolerance: 0.125 };
+        let world = cube.mesh.transformed(cube.transform);
+        let blocks = world.displaced_blocks(field, material.edges, material.depth_scale, 1.0, Some(view));
+        let mut away = 0;
+        for t in 0..blocks.plan.triangles.len() {
+            let [a, b, c] = blocks.plan.triangles[t].map(|v| view.project(world.positions[v as usize]).unwrap());
+            let back = (b - a).perp_dot(c - a) > 0.0;
+            assert_eq!(blocks.faces_away(t, &view), back, "triangle {t}");
+            away += usize::from(back);
+        }
+        assert_eq!(away, 6, "three faces of the cube turn away");
+        let late = (0..blocks.len()).filter(|&i| blocks.plans[i].get().is_none()).count();
+        assert!(late > blocks.len() / 3, "{late} of {} planned late", blocks.len());
+        for i in 0..blocks.len() {
+            let first = blocks.plan_block(i, &mut Vec::new());
+            let got = blocks.plan_of(i).unwrap();
+            assert_eq!((got.stride, got.sides), (first.stride, first.sides), "block {i}");
         }
     }
 
