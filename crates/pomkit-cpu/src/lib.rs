@@ -355,7 +355,7 @@ impl Streamed<'_> {
     /// The samples block `b` of stream `s` may cover, `(x0, y0, x1, y1)` (end exclusive), and
     /// its least depth; `None` when it covers none (off screen, behind the camera, or facing
     /// away).
-    fn bounds(&self, s: usize, b: usize, (sw, sh): (u32, u32), v: &mut BlockVertices) -> Option<([u32; 4], f32)> {
+    fn bounds(&self, s: usize, b: usize, (sw, sh): (u32, u32), v: &mut BlockVertices) -> Option<BlockSamples> {
         let (lo, hi, min_z) = match self.streams[s].blocks.screen_bounds(b) {
             Some(known) => (known.min, known.max, known.min_z),
             None => self.made_bounds(s, b, (sw, sh), v)?,
@@ -727,7 +727,7 @@ fn shade_bands(
     // (`f32::INFINITY` for a block that covers none.)
     let mut rects: Vec<Vec<BlockSamples>> = Vec::with_capacity(streamed.streams.len());
     for (si, stream) in streamed.streams.iter().enumerate() {
-        let bounds: Vec<Option<([u32; 4], f32)>> = (0..stream.blocks.len())
+        let bounds: Vec<Option<BlockSamples>> = (0..stream.blocks.len())
             .into_par_iter()
             .map_init(BlockVertices::default, |v, b| streamed.bounds(si, b, (sw, sh), v))
             .collect();
@@ -846,13 +846,13 @@ fn shade_tile(
         }
     };
     let mut block = BlockVertices::default();
+    let tile = [x0, y0, x1, y1];
     for &(_, item) in bin {
         match item {
             Item::Triangle(ti) => draw(&tris[ti as usize], &mut buf, &mut visible),
             Item::Block(si, b) => {
                 // Occlusion culling: a block behind what the tile holds is not made at all.
                 let (rect, min_z) = rects[si as usize][b as usize];
-                let tile = [x0, y0, x1, y1];
                 let hidden = if !shading.cull_blocks {
                     false
                 } else if shading.visibility_first {

@@ -68,6 +68,21 @@ impl DisplacementView {
         let c = self.view_proj * p.extend(1.0);
         (c.z >= 0.0 && c.w > 1e-6 && c.is_finite()).then(|| self.screen(c))
     }
+
+    /// The screen box and least NDC depth of world `points`, which hold the projection of their
+    /// convex hull (and its least depth, a ratio of affine functions, at one of them) when all
+    /// lie in front of the near plane; `None` when one does not.
+    fn hull_bounds(&self, points: impl IntoIterator<Item = Vec3>) -> Option<ScreenBounds> {
+        let mut out = ScreenBounds { min: Vec2::splat(f32::INFINITY), max: Vec2::splat(f32::NEG_INFINITY), min_z: 1.0 };
+        for q in points {
+            let clip = self.view_proj * q.extend(1.0);
+            let s = self.project(q)?;
+            out.min = out.min.min(s);
+            out.max = out.max.max(s);
+            out.min_z = out.min_z.min(clip.z / clip.w);
+        }
+        Some(out)
+    }
 }
 
 /// The triangles of [`Mesh::displaced_for_shading`], made a small block at a time instead of all
@@ -373,6 +388,8 @@ impl DisplacedBlocks<'_> {
             let down = v.normal * (self.depth_scale * uv_unit_length(v.uv_scale));
             Some(view.project(v.position)?.distance(view.project(v.position - down)?))
         });
+        // The largest of them, when all are known.
+        let reach = reaches.iter().try_fold(0.0f32, |m, r| r.map(|r| m.max(r)));
         let tol = view.tolerance;
         // A block whose relief is too shallow to see whole passes every test below at the
         // coarsest stride: a grid point and the coarse surface over it (which interpolates
@@ -383,8 +400,7 @@ impl DisplacedBlocks<'_> {
             let corners = [(i0, j0), (i1, j0), (i0, j1), (i1, j1)].map(|(i, j)| uv_at(i, j));
             let lo = corners.iter().fold(Vec2::INFINITY, |m, &c| m.min(c));
             let hi = corners.iter().fold(Vec2::NEG_INFINITY, |m, &c| m.max(c));
-            let r = reaches.iter().try_fold(0.0f32, |m, r| r.map(|r| m.max(r)));
-            if let (Some((d0, d1)), Some(r)) = (ranges.over(lo, hi), r)
+            if let (Some((d0, d1)), Some(r)) = (ranges.over(lo, hi), reach)
                 && (d1 - d0 + 1e-5) * r <= tol
             {
                 let s = STRIDES[0];
@@ -437,7 +453,7 @@ impl DisplacedBlocks<'_> {
             return BlockPlan { stride: 1, sides, bounds: None };
         }
         let bounds = self.flat_bounds(t, &blended, depth_range(fine), view);
-        let Some(r) = reaches.iter().try_fold(0.0f32, |m, r| r.map(|r| m.max(r))) else {
+        let Some(r) = reach else {
             return BlockPlan { stride: 1, sides, bounds };
         };
         // Over the block: every grid point against the coarse cell's triangle under it, split
@@ -480,19 +496,10 @@ impl DisplacedBlocks<'_> {
         view: &DisplacementView,
     ) -> Option<ScreenBounds> {
         let down = self.flat_down(t)?;
-        let mut out = ScreenBounds { min: Vec2::splat(f32::INFINITY), max: Vec2::splat(f32::NEG_INFINITY), min_z: 1.0 };
-        for v in corners {
-            let p = v.as_ref()?.position;
-            for d in [lo, hi] {
-                let q = p - down * d;
-                let clip = view.view_proj * q.extend(1.0);
-                let s = view.project(q)?;
-                out.min = out.min.min(s);
-                out.max = out.max.max(s);
-                out.min_z = out.min_z.min(clip.z / clip.w);
-            }
+        if corners.iter().any(Option::is_none) {
+            return None;
         }
-        Some(out)
+        view.hull_bounds(corners.iter().flatten().flat_map(|v| [lo, hi].map(|d| v.position - down * d)))
     }
 
     /// For a flat input triangle `t` (one normal and one `uv_scale` at its three corners), the
@@ -661,21 +668,7 @@ impl DisplacedBlocks<'_> {
         let (d_min, d_max) = self.ranges.as_ref().and_then(|r| r.over(uv_lo, uv_hi)).unwrap_or(self.depth_range);
         let per_depth = f64::from(self.depth_scale) * s_max.x.sqrt() * s_max.y.sqrt() / n_min * (1.0 + 1e-4);
         let reach = [f64::from(d_min.min(0.0)) * per_depth, f64::from(d_max.max(0.0)) * per_depth];
-        let mut out = ScreenBounds { min: Vec2::splat(f32::INFINITY), max: Vec2::splat(f32::NEG_INFINITY), min_z: 1.0 };
-        for (p, nn, _, _) in corners {
-            for s in reach {
-                let q = (p - nn * s).as_vec3();
-                let clip = view.view_proj * q.extend(1.0);
-                if !(clip.is_finite() && clip.w > 1e-6 && clip.z >= 0.0) {
-                    return None;
-                }
-                let at = view.screen(clip);
-                out.min = out.min.min(at);
-                out.max = out.max.max(at);
-                out.min_z = out.min_z.min(clip.z / clip.w);
-            }
-        }
-        Some(out)
+        view.hull_bounds(corners.into_iter().flat_map(|(p, nn, _, _)| reach.map(|s| (p - nn * s).as_vec3())))
     }
 }
 
