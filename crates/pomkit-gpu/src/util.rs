@@ -122,6 +122,8 @@ pub fn texture_entry(binding: u32, filterable: bool, visibility: wgpu::ShaderSta
 
 /// The sampler pomkit reads height maps and material textures with: trilinear, wrapping or
 /// clamping as `edges` says (the material's, the height resource's and the ray probe's).
+#[cfg(feature = "renderer")]
+#[must_use]
 pub fn trilinear_sampler(device: &wgpu::Device, edges: pomkit_core::EdgeMode, label: &str) -> wgpu::Sampler {
     let address = match edges {
         pomkit_core::EdgeMode::Wrap => wgpu::AddressMode::Repeat,
