@@ -1343,21 +1343,28 @@ fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampl
     // units) covered per unit climbed.
     let tan_theta = sqrt(max(1.0 - l.z * l.z, 0.0)) / l.z;
     let light_elevation = atan2(1.0, tan_theta);
-    var visibility = 1.0;
     var fetches = 0u;
+    // The steepest rise of the profile above the receiver per unit climbed: the visibility falls
+    // as a sample's elevation seen from the receiver, atan2(depth - d, t * tan_theta), rises,
+    // and that rises with the slope (depth - d) / t, so the darkest sample is the steepest and
+    // one arctangent per ray serves (pomkit_core shadow.rs `soft_visibility`).
+    var slope = -POMKIT_BIG;
     for (var i = 1u; i < n; i++) {
         let t = depth * f32(i) / f32(n);
         let d = pomkit_depth_at(heights, samp, uv + s * t, lod);
         fetches += 1u;
         if soft {
-            // The blocker's elevation seen from the receiver against the light's: nearer
-            // blockers subtend more and darken more; the darkest sample is kept.
-            let elevation = atan2(depth - d, t * tan_theta);
-            let v = clamp(0.5 - (elevation - light_elevation) / (2.0 * rho), 0.0, 1.0);
-            visibility = min(visibility, v);
+            slope = max(slope, (depth - d) / t);
         } else if d < depth - t - 1e-5 {
             return PomkitShadow(0.0, fetches);
         }
+    }
+    var visibility = 1.0;
+    if soft && n > 1u {
+        // The blocker's elevation against the light's: nearer blockers subtend more and darken
+        // more.
+        let elevation = atan2(slope, tan_theta);
+        visibility = clamp(0.5 - (elevation - light_elevation) / (2.0 * rho), 0.0, 1.0);
     }
     return PomkitShadow(visibility, fetches);
 }
