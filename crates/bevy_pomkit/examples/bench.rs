@@ -139,7 +139,7 @@ fn main() {
             };
             let (sh, pdo) = match method {
                 Method::Pomkit(_) => (shadow.name(), pdo),
-                Method::Bevy(_) => ("-", "-"),
+                Method::Bevy(_) | Method::Plain => ("-", "-"),
             };
             println!("| {} | {ms:.1} | {sh} | {pdo} |", method.name());
         }
@@ -254,15 +254,21 @@ fn accuracy(method: Method, field: &HeightField, surface: &Surface, flipped: boo
     let uvs = app.world().resource_mut::<Assets<Image>>().add(uv_image(1024));
     let mut fetch_frame = None;
     match method {
-        Method::Bevy(m) => {
+        Method::Bevy(_) | Method::Plain => {
+            let parallax = match method {
+                Method::Bevy(m) => StandardMaterial {
+                    depth_map: Some(depth_map),
+                    parallax_depth_scale: DEPTH_SCALE,
+                    parallax_mapping_method: m,
+                    max_parallax_layer_count: LAYERS,
+                    ..default()
+                },
+                _ => StandardMaterial::default(),
+            };
             let material = app.world().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
                 base_color_texture: Some(uvs),
                 unlit: true,
-                depth_map: Some(depth_map),
-                parallax_depth_scale: DEPTH_SCALE,
-                parallax_mapping_method: m,
-                max_parallax_layer_count: LAYERS,
-                ..default()
+                ..parallax
             });
             app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
         }

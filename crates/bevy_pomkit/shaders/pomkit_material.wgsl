@@ -1,10 +1,16 @@
-// bevy_pomkit: the fragment stage of `ExtendedMaterial<StandardMaterial, Pomkit>`, for the main
-// (forward) pass, the prepass and the shadow passes. Tracing, self-shadows and pixel depth
-// offset come from pomkit's shader library (the `pomkit::library` module); Bevy's PBR shading
-// then samples every texture of the standard material at the traced UV.
+// bevy_pomkit: the fragment stage of `ExtendedMaterial<StandardMaterial, Pomkit>`, for the forward
+// pass, the prepass (depth, normals, deferred G-buffer) and the shadow passes. Tracing,
+// self-shadows and pixel depth offset come from pomkit's shader library (the `pomkit::library`
+// module); Bevy's PBR then shades the standard material sampled at the traced UV.
 //
 // Conventions (ARCHITECTURE.md, Conventions): depth d in [0, 1] below the polygon, the traced
 // UV space is the material's after `uv_transform`, and `depth_scale` is in those UV units.
+//
+// Every option is a pipeline specialisation (src/material.rs, `PomkitKey`): the technique, the
+// self-shadow mode, the height map's normals, the LOD band, the debug view, pixel depth offset
+// and which of the standard material's textures exist. What is off is not in the shader at all:
+// a GPU that executes both sides of a branch (Mesa's lavapipe does, for every branch) pays only
+// for what the material uses (docs/BENCHMARKS.md, Bevy, what each part costs).
 
 #import bevy_pbr::{
     pbr_bindings,
@@ -14,34 +20,49 @@
 }
 #import pomkit::library::{
     PomkitParams, PomkitHit, pomkit_tangent_frame, pomkit_uv_scale, pomkit_view_ray, pomkit_light_ray,
-    pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_receiver, pomkit_shadow,
+    pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_lift_to_surface, pomkit_shadow,
     pomkit_hit_position, pomkit_pixel_depth, pomkit_safe_normalize, POMKIT_FLAT, POMKIT_NORMAL,
     POMKIT_SHADOW_NONE,
 }
 
 #ifdef PREPASS_PIPELINE
 #import bevy_pbr::{prepass_io::VertexOutput, pbr_prepass_functions}
+#ifdef DEFERRED_PREPASS
+#import bevy_pbr::pbr_deferred_functions::deferred_gbuffer_from_pbr_input
+#endif
 #else
 #import bevy_pbr::{
     forward_io::VertexOutput,
-    pbr_fragment::pbr_input_from_standard_material,
     lighting,
     shadows,
     mesh_view_types,
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
-    mesh_view_bindings::lights,
+    mesh_view_bindings::{lights, clustered_lights},
+    clustered_forward as clustering,
+    decal::clustered::apply_decals,
 }
+#endif
+
+#ifdef POMKIT_BEVY_INPUT
+#import bevy_pbr::pbr_fragment::pbr_input_from_standard_material
+#else
+#import bevy_pbr::pbr_fragment::pbr_input_from_vertex_output
+#ifdef LIGHTMAP
+#import bevy_pbr::lightmap::lightmap
+#endif
+#ifdef SCREEN_SPACE_AMBIENT_OCCLUSION
+#import bevy_pbr::mesh_view_bindings::screen_space_ambient_occlusion_texture
+#import bevy_pbr::ssao_utils::ssao_multibounce
+#endif
 #endif
 
 struct PomkitMaterial {
     params: PomkitParams,
-    // Bit 0: textures built and parameters valid; bit 1: shade with the height map's normals;
-    // bit 2: pixel depth offset.
+    // Bit 0: textures built and parameters valid.
     flags: u32,
-    // 0 shaded, 1 hit UV, 2 fetches, 3 self-shadow.
-    debug: u32,
     pad0: u32,
     pad1: u32,
+    pad2: u32,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> pomkit: PomkitMaterial;
@@ -51,22 +72,42 @@ struct PomkitMaterial {
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var pomkit_normals: texture_2d<f32>;
 
 const FLAG_READY: u32 = 1u;
-const FLAG_NORMALS: u32 = 2u;
-const FLAG_PIXEL_DEPTH: u32 = 4u;
+
+// The specialisation (src/material.rs, `PomkitKey::shader_defs`).
+const TECHNIQUE: u32 = #{POMKIT_TECHNIQUE}u;
+const SHADOW_MODE: u32 = #{POMKIT_SHADOW_MODE}u;
+// 0 shaded, 1 hit UV, 2 fetches, 3 self-shadow.
+const DEBUG: u32 = #{POMKIT_DEBUG}u;
+
+/// The material's parameters with the specialised technique and shadow mode as constants, so
+/// that the library's dispatch folds to the one technique and the one shadow mode.
+fn params() -> PomkitParams {
+    var p = pomkit.params;
+    p.technique = TECHNIQUE;
+    p.shadow_mode = SHADOW_MODE;
+    return p;
+}
+
+fn displaces() -> bool {
+    return TECHNIQUE != POMKIT_FLAT && TECHNIQUE != POMKIT_NORMAL;
+}
 
 /// The traced surface of one fragment.
 struct Traced {
     /// The material is ready and the mesh has UVs, normals and tangents.
     ready: bool,
-    /// A displacing technique traced the view ray (ready, and LOD weight above 0).
-    traced: bool,
-    /// The hit, in the material's UV space (after `uv_transform`).
+    /// The hit, in the material's UV space (after `uv_transform`), after the LOD band's blend.
     hit: PomkitHit,
+    /// The point self-shadows are traced from: the hit lifted onto the height surface the
+    /// shadow march reads.
+    receiver: PomkitHit,
     /// The entry UV in the same space.
     uv: vec2<f32>,
-    /// The hit in the mesh's own UV space (what Bevy's standard material samples through its
-    /// `uv_transform`).
-    raw_uv: vec2<f32>,
+    /// Screen derivatives of the entry UV: every texture is sampled at the hit with these, the
+    /// footprint of the pixel, not the derivatives of the hit UV (which jump where neighbouring
+    /// pixels hit different features and would pick a far too coarse mip).
+    duv_dx: vec2<f32>,
+    duv_dy: vec2<f32>,
     /// LOD fade weight of the full technique, and the height map's mip level.
     weight: f32,
     lod: f32,
@@ -78,6 +119,11 @@ struct Traced {
     uv_scale: vec2<f32>,
     /// Unit vector from the surface toward the eye.
     to_eye: vec3<f32>,
+    /// The inverse of uv_transform's linear part, and its translation: mesh UV = minv * (uv - t).
+    minv: mat2x2<f32>,
+    translation: vec2<f32>,
+    /// Texture reads of the trace.
+    fetches: u32,
 }
 
 /// A world vector in the library's ray terms, as the tangent-space vector that
@@ -101,34 +147,34 @@ fn ray_terms(w: vec3<f32>, s: Traced) -> vec3<f32> {
     return vec3<f32>(a * l, -b * l, dot(w, s.n));
 }
 
-fn displaces(technique: u32) -> bool {
-    return technique != POMKIT_FLAT && technique != POMKIT_NORMAL;
-}
-
 /// Traces the view ray of this fragment (for whichever view renders: camera or light).
 fn trace_fragment(in: VertexOutput) -> Traced {
     var s: Traced;
     s.ready = false;
-    s.traced = false;
     s.weight = 0.0;
     s.lod = 0.0;
+    s.fetches = 0u;
     s.n = vec3<f32>(0.0, 0.0, 1.0);
     s.to_eye = vec3<f32>(0.0, 0.0, 1.0);
     s.uv_scale = vec2<f32>(1.0);
+    s.minv = mat2x2<f32>(1.0, 0.0, 0.0, 1.0);
+    s.translation = vec2<f32>(0.0);
 #ifdef VERTEX_UVS_A
     let m3 = pbr_bindings::material.uv_transform;
     let uv = (m3 * vec3<f32>(in.uv, 1.0)).xy;
     s.uv = uv;
-    s.raw_uv = in.uv;
+    s.translation = m3[2].xy;
     s.hit = PomkitHit(uv, 0.0, 0u);
-    // Gradients in uniform control flow, before any branch (HLSL's tex2Dgrad in the published POM shaders, docs/REFERENCES.md).
-    let duv_dx = dpdx(uv);
-    let duv_dy = dpdy(uv);
+    s.receiver = s.hit;
+    // Gradients in uniform control flow, before any branch (HLSL's tex2Dgrad in the published
+    // POM shaders, docs/REFERENCES.md).
+    s.duv_dx = dpdx(uv);
+    s.duv_dy = dpdy(uv);
+#ifdef VERTEX_TANGENTS
     let draw_dx = dpdx(in.uv);
     let draw_dy = dpdy(in.uv);
     let dw_dx = dpdx(in.world_position.xyz);
     let dw_dy = dpdy(in.world_position.xyz);
-#ifdef VERTEX_TANGENTS
     let is_orthographic = view.clip_from_view[3].w == 1.0;
     s.to_eye = pbr_functions::calculate_view(in.world_position, is_orthographic);
     let f = pomkit_tangent_frame(in.world_normal, in.world_tangent);
@@ -150,36 +196,55 @@ fn trace_fragment(in: VertexOutput) -> Traced {
     let dv_raw = -b * s_raw.y;
     let m = mat2x2<f32>(m3[0].xy, m3[1].xy);
     let dm = determinant(m);
-    var minv = mat2x2<f32>(1.0, 0.0, 0.0, 1.0);
     if abs(dm) > 1e-30 {
-        minv = mat2x2<f32>(m[1].y, -m[0].y, -m[1].x, m[0].x) * (1.0 / dm);
+        s.minv = mat2x2<f32>(m[1].y, -m[0].y, -m[1].x, m[0].x) * (1.0 / dm);
     }
-    s.dpdu = du_raw * minv[0].x + dv_raw * minv[0].y;
-    s.dpdv = du_raw * minv[1].x + dv_raw * minv[1].y;
+    s.dpdu = du_raw * s.minv[0].x + dv_raw * s.minv[0].y;
+    s.dpdv = du_raw * s.minv[1].x + dv_raw * s.minv[1].y;
     s.uv_scale = vec2<f32>(length(s.dpdu), length(s.dpdv));
-    if (pomkit.flags & FLAG_READY) == 0u {
-        return s;
-    }
-    s.ready = true;
-    s.lod = pomkit_mip_level(pomkit_heights, duv_dx, duv_dy);
+    s.ready = (pomkit.flags & FLAG_READY) != 0u;
+    s.lod = pomkit_mip_level(pomkit_heights, s.duv_dx, s.duv_dy);
+#ifdef POMKIT_LOD_FADE
     s.weight = pomkit_lod_weight(s.lod, pomkit.params.lod_threshold);
-    if s.weight > 0.0 && displaces(pomkit.params.technique) {
-        s.traced = true;
+#else
+    s.weight = 1.0;
+#endif
+    if displaces() && s.ready && s.weight > 0.0 {
+        let p = params();
         let ray = pomkit_view_ray(ray_terms(-s.to_eye, s), vec2<f32>(1.0));
-        var hit = pomkit_trace(pomkit.params.technique, pomkit_heights, pomkit_pyramid, pomkit_sampler, pomkit.params, uv, ray, s.lod);
-        hit = pomkit_receiver(pomkit.params.technique, pomkit_heights, pomkit_sampler, hit, s.lod);
+        var hit = pomkit_trace(TECHNIQUE, pomkit_heights, pomkit_pyramid, pomkit_sampler, p, uv, ray, s.lod);
+        s.fetches = hit.fetches;
+#ifdef POMKIT_LOD_FADE
+        // The LOD band shades once, at the hit moved toward the entry point by the fade weight
+        // (and raised toward the polygon by it): the picture fades continuously to the
+        // untraced surface, at the cost of one shading instead of two.
+        hit = PomkitHit(mix(uv, hit.uv, s.weight), hit.depth * s.weight, hit.fetches);
+#endif
         s.hit = hit;
-        s.raw_uv = minv * (hit.uv - m3[2].xy);
+        s.receiver = hit;
+#if POMKIT_SHADOW_MODE != 0
+        // Self-shadows march the height surface sampled at mip `lod`: a hit below it (steep's
+        // layers, pom's chords under convex tops, exact's mip-0 surface) would shadow itself in
+        // dashes along the tops (docs/REFERENCES.md, Self-shadows).
+        s.receiver = pomkit_lift_to_surface(pomkit_heights, pomkit_sampler, hit, s.lod);
+        s.fetches += 1u;
+#endif
     }
 #endif
 #endif
     return s;
 }
 
+/// The mesh UV of a point of the traced UV space (what Bevy's own functions sample through
+/// `uv_transform`).
+fn mesh_uv(s: Traced, uv: vec2<f32>) -> vec2<f32> {
+    return s.minv * (uv - s.translation);
+}
+
 /// The world normal of the height map at the hit (pomkit's baked normals: x along +u, y up the
 /// image, z out of the surface).
-fn surface_normal(s: Traced, uv: vec2<f32>) -> vec3<f32> {
-    let nm = pomkit_safe_normalize(textureSampleLevel(pomkit_normals, pomkit_sampler, uv, 0.0).xyz, vec3<f32>(0.0, 0.0, 1.0));
+fn surface_normal(s: Traced) -> vec3<f32> {
+    let nm = pomkit_safe_normalize(textureSampleGrad(pomkit_normals, pomkit_sampler, s.hit.uv, s.duv_dx, s.duv_dy).xyz, vec3<f32>(0.0, 0.0, 1.0));
     let t = pomkit_safe_normalize(s.dpdu, vec3<f32>(1.0, 0.0, 0.0));
     let b = pomkit_safe_normalize(-s.dpdv, vec3<f32>(0.0, 1.0, 0.0));
     return pomkit_safe_normalize(t * nm.x + b * nm.y + s.n * nm.z, s.n);
@@ -195,13 +260,122 @@ fn traced_depth(in: VertexOutput, s: Traced) -> f32 {
     let polygon = in.position.z;
 #endif
 #ifdef POMKIT_PIXEL_DEPTH
-    if s.traced && (pomkit.flags & FLAG_PIXEL_DEPTH) != 0u && s.hit.depth > 0.0 {
+    if s.ready && s.hit.depth > 0.0 {
         let p = pomkit_hit_position(in.world_position.xyz, s.to_eye, s.n, s.hit.depth, pomkit.params.depth_scale, s.uv_scale);
         // Bevy's depth buffers are reverse-Z (near = 1).
         return pomkit_pixel_depth(p, view.clip_from_world, polygon, true);
     }
 #endif
     return polygon;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The standard material at the hit
+// ---------------------------------------------------------------------------------------------
+
+/// The standard material's inputs at the hit, every texture sampled with the entry UV's
+/// gradients. The base colour, emissive, metallic-roughness, occlusion and normal-map textures
+/// are read only where the material has them (POMKIT_TEX_*). Materials that use what this does
+/// not read (clearcoat, anisotropy, transmission, specular textures, a second UV set) take
+/// Bevy's own function at the hit (POMKIT_BEVY_INPUT), then the textures above again with the
+/// entry UV's gradients.
+fn standard_input(in: VertexOutput, is_front: bool, s: Traced) -> pbr_types::PbrInput {
+    let m = pbr_bindings::material;
+    let flags = m.flags;
+    let double_sided = (flags & pbr_types::STANDARD_MATERIAL_FLAGS_DOUBLE_SIDED_BIT) != 0u;
+    let uv = s.hit.uv;
+    let ddx = s.duv_dx;
+    let ddy = s.duv_dy;
+#ifdef POMKIT_BEVY_INPUT
+    var vin = in;
+#ifdef VERTEX_UVS_A
+    vin.uv = mesh_uv(s, uv);
+#endif
+    var p = pbr_input_from_standard_material(vin, is_front);
+    var base_color = vec4<f32>(1.0);
+#ifdef VERTEX_COLORS
+    base_color = in.color;
+#endif
+    p.material.base_color = base_color * m.base_color;
+#else
+    var p = pbr_input_from_vertex_output(in, is_front, double_sided);
+    p.material.flags = flags;
+    p.material.base_color *= m.base_color;
+    p.material.deferred_lighting_pass_id = m.deferred_lighting_pass_id;
+    p.material.uv_transform = m.uv_transform;
+    p.material.alpha_cutoff = m.alpha_cutoff;
+    p.material.ior = m.ior;
+    p.material.attenuation_color = m.attenuation_color;
+    p.material.attenuation_distance = m.attenuation_distance;
+    p.material.reflectance = m.reflectance;
+    p.material.clearcoat = m.clearcoat;
+    p.material.clearcoat_perceptual_roughness = m.clearcoat_perceptual_roughness;
+    p.material.specular_transmission = m.specular_transmission;
+    p.material.thickness = m.thickness;
+    p.material.diffuse_transmission = m.diffuse_transmission;
+    p.N = normalize(p.world_normal);
+    p.clearcoat_N = p.N;
+#ifdef LIGHTMAP
+    p.lightmap_light = lightmap(in.uv_b, m.lightmap_exposure, in.instance_index);
+#endif
+#endif
+#ifdef POMKIT_TEX_BASE_COLOR
+    p.material.base_color *= textureSampleGrad(pbr_bindings::base_color_texture, pbr_bindings::base_color_sampler, uv, ddx, ddy);
+#ifdef ALPHA_TO_COVERAGE
+    if (flags & pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_RESERVED_BITS) == pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_ALPHA_TO_COVERAGE {
+        // Sharpened alpha edges, as the standard material has them.
+        p.material.base_color.a = (p.material.base_color.a - m.alpha_cutoff) / max(fwidth(p.material.base_color.a), 0.0001) + 0.5;
+    }
+#endif
+#endif
+    var emissive = m.emissive;
+#ifdef POMKIT_TEX_EMISSIVE
+    emissive = vec4<f32>(emissive.rgb * textureSampleGrad(pbr_bindings::emissive_texture, pbr_bindings::emissive_sampler, uv, ddx, ddy).rgb, emissive.a);
+#endif
+    p.material.emissive = emissive;
+    var metallic = m.metallic;
+    var perceptual_roughness = m.perceptual_roughness;
+#ifdef POMKIT_TEX_METALLIC_ROUGHNESS
+    // glTF's channels: roughness in green, metallic in blue.
+    let mr = textureSampleGrad(pbr_bindings::metallic_roughness_texture, pbr_bindings::metallic_roughness_sampler, uv, ddx, ddy);
+    metallic *= mr.b;
+    perceptual_roughness *= mr.g;
+#endif
+    p.material.metallic = metallic;
+    p.material.perceptual_roughness = perceptual_roughness;
+    var diffuse_occlusion = vec3<f32>(1.0);
+    var specular_occlusion = 1.0;
+#ifdef POMKIT_TEX_OCCLUSION
+    diffuse_occlusion *= textureSampleGrad(pbr_bindings::occlusion_texture, pbr_bindings::occlusion_sampler, uv, ddx, ddy).r;
+#endif
+#ifndef POMKIT_BEVY_INPUT
+#ifdef SCREEN_SPACE_AMBIENT_OCCLUSION
+    // Screen-space ambient occlusion as the standard material combines it, with specular
+    // occlusion from Lagarde and de Rousiers 2014 (Moving Frostbite to PBR).
+    let ssao = textureLoad(screen_space_ambient_occlusion_texture, vec2<i32>(in.position.xy), 0i).r;
+    diffuse_occlusion = min(diffuse_occlusion, ssao_multibounce(ssao, p.material.base_color.rgb));
+    let n_dot_v = max(dot(p.N, p.V), 0.0001);
+    let roughness = perceptual_roughness * perceptual_roughness;
+    specular_occlusion = saturate(pow(n_dot_v + ssao, exp2(-16.0 * roughness - 1.0)) - 1.0 + ssao);
+#endif
+    p.diffuse_occlusion = diffuse_occlusion;
+    p.specular_occlusion = specular_occlusion;
+#else
+    p.diffuse_occlusion = min(p.diffuse_occlusion, diffuse_occlusion);
+#endif
+#ifdef STANDARD_MATERIAL_NORMAL_MAP
+#ifdef VERTEX_TANGENTS
+    let tbn = pbr_functions::calculate_tbn_mikktspace(p.world_normal, in.world_tangent);
+    let nt = textureSampleGrad(pbr_bindings::normal_map_texture, pbr_bindings::normal_map_sampler, uv, ddx, ddy).rgb;
+    p.N = pbr_functions::apply_normal_mapping(flags, tbn, double_sided, is_front, nt);
+#endif
+#endif
+#ifdef POMKIT_NORMALS
+    if s.ready {
+        p.N = surface_normal(s);
+    }
+#endif
+    return p;
 }
 
 #ifdef PREPASS_PIPELINE
@@ -213,24 +387,47 @@ struct PomkitPrepassOutput {
 #ifdef MOTION_VECTOR_PREPASS
     @location(1) motion_vector: vec2<f32>,
 #endif
+#ifdef DEFERRED_PREPASS
+    @location(2) deferred: vec4<u32>,
+    @location(3) deferred_lighting_pass_id: u32,
+#endif
+#ifdef POMKIT_FRAG_DEPTH
     @builtin(frag_depth) frag_depth: f32,
+#endif
 }
 
+#ifdef POMKIT_CONSERVATIVE_DEPTH
+@early_depth_test(less_equal)
+#endif
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> PomkitPrepassOutput {
     let s = trace_fragment(in);
     pbr_prepass_functions::prepass_alpha_discard(in);
     var out: PomkitPrepassOutput;
+#ifdef POMKIT_FRAG_DEPTH
     out.frag_depth = traced_depth(in, s);
+#endif
+#ifdef DEFERRED_PREPASS
+    var p = standard_input(in, is_front, s);
+    p.material.base_color = pbr_functions::alpha_discard(p.material, p.material.base_color);
+    out.deferred = deferred_gbuffer_from_pbr_input(p);
+    out.deferred_lighting_pass_id = p.material.deferred_lighting_pass_id;
+#ifdef NORMAL_PREPASS
+    out.normal = vec4<f32>(p.N * 0.5 + vec3<f32>(0.5), 1.0);
+#endif
+#else
 #ifdef NORMAL_PREPASS
     var n = s.n;
 #ifdef NORMAL_PREPASS_OR_DEFERRED_PREPASS
     n = normalize(in.world_normal);
 #endif
-    if s.ready && (pomkit.flags & FLAG_NORMALS) != 0u {
-        n = surface_normal(s, s.hit.uv);
+#ifdef POMKIT_NORMALS
+    if s.ready {
+        n = surface_normal(s);
     }
+#endif
     out.normal = vec4<f32>(n * 0.5 + vec3<f32>(0.5), 1.0);
+#endif
 #endif
 #ifdef MOTION_VECTOR_PREPASS
     out.motion_vector = pbr_prepass_functions::calculate_motion_vector(in.world_position, in.previous_world_position);
@@ -247,99 +444,173 @@ struct PomkitFragmentOutput {
 #endif
 }
 
-/// A fragment shaded by `lit`.
+/// Bevy's lighting input for `p`, as its own PBR lighting builds it.
+fn lighting_input(p: pbr_types::PbrInput) -> lighting::LightingInput {
+    let metallic = p.material.metallic;
+    let perceptual_roughness = p.material.perceptual_roughness;
+    let n_dot_v = max(dot(p.N, p.V), 0.0001);
+    var li: lighting::LightingInput;
+    li.layers[lighting::LAYER_BASE].NdotV = n_dot_v;
+    li.layers[lighting::LAYER_BASE].N = p.N;
+    li.layers[lighting::LAYER_BASE].R = reflect(-p.V, p.N);
+    li.layers[lighting::LAYER_BASE].perceptual_roughness = perceptual_roughness;
+    li.layers[lighting::LAYER_BASE].roughness = lighting::perceptualRoughnessToRoughness(perceptual_roughness);
+    li.P = p.world_position.xyz;
+    li.V = p.V;
+    li.diffuse_color = pbr_functions::calculate_diffuse_color(
+        p.material.base_color.rgb,
+        metallic,
+        p.material.specular_transmission,
+        p.material.diffuse_transmission,
+    );
+    li.metallic = metallic;
+    li.F0_dielectric = pbr_functions::calculate_F0_dielectric(p.material.reflectance);
+    li.F0_metallic = p.material.base_color.rgb;
+    li.F_ab = lighting::F_AB(perceptual_roughness, n_dot_v);
+#ifdef STANDARD_MATERIAL_CLEARCOAT
+    let cc_roughness = p.material.clearcoat_perceptual_roughness;
+    li.layers[lighting::LAYER_CLEARCOAT].NdotV = max(dot(p.clearcoat_N, p.V), 0.0001);
+    li.layers[lighting::LAYER_CLEARCOAT].N = p.clearcoat_N;
+    li.layers[lighting::LAYER_CLEARCOAT].R = reflect(-p.V, p.clearcoat_N);
+    li.layers[lighting::LAYER_CLEARCOAT].perceptual_roughness = cc_roughness;
+    li.layers[lighting::LAYER_CLEARCOAT].roughness = lighting::perceptualRoughnessToRoughness(cc_roughness);
+    li.clearcoat_strength = p.material.clearcoat;
+#endif
+#ifdef STANDARD_MATERIAL_ANISOTROPY
+    li.anisotropy = p.anisotropy_strength;
+    li.Ta = p.anisotropy_T;
+    li.Ba = p.anisotropy_B;
+#endif
+    return li;
+}
+
+/// Light that lights `p` and reaches it: Bevy's PBR lighting with pomkit's self-shadow folded
+/// into every directional, point and spot light's direct light.
 struct Lit {
-    /// The lit colour, before post-processing.
     color: vec4<f32>,
-    pbr_input: pbr_types::PbrInput,
-    /// Visibility of the first directional light.
+    /// Self-shadow visibility of the first directional light.
     visibility: f32,
-    /// Fetches of the shadow traces.
+    /// Texture reads of the shadow traces.
     fetches: u32,
 }
 
-/// Bevy's PBR shading of the standard material at the traced hit (`traced`) or at the polygon,
-/// with pomkit's self-shadows applied to each directional light's direct light.
-fn lit(in: VertexOutput, is_front: bool, s: Traced, traced: bool) -> Lit {
-    var vin = in;
-    var hit = PomkitHit(s.uv, 0.0, 0u);
-#ifdef VERTEX_UVS_A
-    if traced {
-        vin.uv = s.raw_uv;
-        hit = s.hit;
+/// What a light's self-shadow trace needs: the light's world direction at the receiver.
+fn self_shadow(s: Traced, l_world: vec3<f32>) -> vec2<f32> {
+    if SHADOW_MODE == POMKIT_SHADOW_NONE {
+        return vec2<f32>(1.0, 0.0);
     }
-#endif
-    var pbr_input = pbr_input_from_standard_material(vin, is_front);
-    pbr_input.material.base_color = pbr_functions::alpha_discard(pbr_input.material, pbr_input.material.base_color);
-    if s.ready && (pomkit.flags & FLAG_NORMALS) != 0u {
-        pbr_input.N = surface_normal(s, hit.uv);
+    // A light below the polygon's plane lights none of the relief (Tatarchuk 2006 skips the
+    // trace there); its direct light is zero on the geometric side anyway.
+    if !(dot(s.n, l_world) > 0.0) || !s.ready || !displaces() {
+        return vec2<f32>(select(1.0, 0.0, s.ready && displaces()), 0.0);
     }
+    let sh = pomkit_shadow(pomkit_heights, pomkit_pyramid, pomkit_sampler, params(), s.receiver.uv, s.receiver.depth, pomkit_light_ray(ray_terms(l_world, s), vec2<f32>(1.0)), s.lod);
+    return vec2<f32>(sh.visibility, f32(sh.fetches));
+}
+
+fn lit(in: VertexOutput, s: Traced, p: pbr_types::PbrInput) -> Lit {
     var out: Lit;
     out.visibility = 1.0;
     out.fetches = 0u;
-    let unlit = (pbr_input.material.flags & pbr_types::STANDARD_MATERIAL_FLAGS_UNLIT_BIT) != 0u;
-    var color = pbr_input.material.base_color;
-    if !unlit {
-        color = pbr_functions::apply_pbr_lighting(pbr_input);
+    let unlit = (p.material.flags & pbr_types::STANDARD_MATERIAL_FLAGS_UNLIT_BIT) != 0u;
+    if unlit {
+        out.color = p.material.base_color;
+        return out;
     }
-    if traced && !unlit && pomkit.params.shadow_mode != POMKIT_SHADOW_NONE {
-        // Each directional light's direct contribution, as Bevy's lighting computes it, scaled
-        // by pomkit's self-shadow: color -= exposure * (1 - visibility) * contribution.
-        let metallic = pbr_input.material.metallic;
-        let perceptual_roughness = pbr_input.material.perceptual_roughness;
-        let NdotV = max(dot(pbr_input.N, pbr_input.V), 0.0001);
-        var li: lighting::LightingInput;
-        li.layers[lighting::LAYER_BASE].NdotV = NdotV;
-        li.layers[lighting::LAYER_BASE].N = pbr_input.N;
-        li.layers[lighting::LAYER_BASE].R = reflect(-pbr_input.V, pbr_input.N);
-        li.layers[lighting::LAYER_BASE].perceptual_roughness = perceptual_roughness;
-        li.layers[lighting::LAYER_BASE].roughness = lighting::perceptualRoughnessToRoughness(perceptual_roughness);
-        li.P = pbr_input.world_position.xyz;
-        li.V = pbr_input.V;
-        li.diffuse_color = pbr_functions::calculate_diffuse_color(
-            pbr_input.material.base_color.rgb,
-            metallic,
-            pbr_input.material.specular_transmission,
-            pbr_input.material.diffuse_transmission,
-        );
-        li.metallic = metallic;
-        li.F0_dielectric = pbr_functions::calculate_F0_dielectric(pbr_input.material.reflectance);
-        li.F0_metallic = pbr_input.material.base_color.rgb;
-        li.F_ab = lighting::F_AB(perceptual_roughness, NdotV);
-        let view_z = dot(vec4<f32>(
-            view.view_from_world[0].z,
-            view.view_from_world[1].z,
-            view.view_from_world[2].z,
-            view.view_from_world[3].z
-        ), pbr_input.world_position);
-        let n_lights = lights.n_directional_lights;
-        for (var i = 0u; i < n_lights; i++) {
-            let l_world = lights.directional_lights[i].direction_to_light;
-            var vis = 0.0;
-            if dot(s.n, l_world) > 0.0 {
-                let sh = pomkit_shadow(pomkit_heights, pomkit_pyramid, pomkit_sampler, pomkit.params, hit.uv, hit.depth, pomkit_light_ray(ray_terms(l_world, s), vec2<f32>(1.0)), s.lod);
-                vis = sh.visibility;
-                out.fetches += sh.fetches;
+#if POMKIT_SHADOW_MODE == 0
+    out.color = pbr_functions::apply_pbr_lighting(p);
+#else
+    let receiver = (p.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) != 0u;
+#ifdef POMKIT_BEVY_SHADOW_MAPS
+    // Bevy's lighting applies the shadow maps (transmitted light or contact shadows need them
+    // there); each self-shadowed light's shadowed share is then taken back out, which reads its
+    // shadow map a second time.
+    out.color = pbr_functions::apply_pbr_lighting(p);
+    let maps_applied = true;
+#else
+    // Bevy's lighting without shadow maps, then each light's share that its shadow map or the
+    // self-shadow removes taken out: one shadow-map read per light, as without pomkit.
+    var q = p;
+    q.flags = p.flags & ~MESH_FLAGS_SHADOW_RECEIVER_BIT;
+    out.color = pbr_functions::apply_pbr_lighting(q);
+    let maps_applied = false;
+#endif
+    var li = lighting_input(p);
+    let view_z = dot(vec4<f32>(
+        view.view_from_world[0].z,
+        view.view_from_world[1].z,
+        view.view_from_world[2].z,
+        view.view_from_world[3].z
+    ), p.world_position);
+    var removed = vec3<f32>(0.0);
+    for (var i = 0u; i < lights.n_directional_lights; i++) {
+        let light = &lights.directional_lights[i];
+        let v = self_shadow(s, (*light).direction_to_light);
+        out.fetches += u32(v.y);
+        if i == 0u {
+            out.visibility = v.x;
+        }
+        var map = 1.0;
+        if receiver && ((*light).flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            map = shadows::fetch_directional_shadow(i, p.world_position, p.world_normal, view_z, p.frag_coord.xy);
+        }
+        // The share of this light's unshadowed direct light that the picture must not hold.
+        let share = select(1.0 - map * v.x, map * (1.0 - v.x), maps_applied);
+        if share > 0.0 {
+#ifdef LIGHTMAP
+            let enable_diffuse = ((*light).flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_AFFECTS_LIGHTMAPPED_MESH_DIFFUSE_BIT) != 0u;
+#else
+            let enable_diffuse = true;
+#endif
+            removed += share * lighting::directional_light(i, &li, enable_diffuse);
+        }
+    }
+#ifdef POMKIT_POINT_LIGHTS
+    // Point and spot lights of the fragment's cluster, as Bevy's lighting visits them (only
+    // where the world has any: a GPU that runs every loop at least once would pay for an empty
+    // one).
+    let cluster = clustering::view_fragment_cluster_index(p.frag_coord.xy, view_z, p.is_orthographic);
+    let ranges = clustering::unpack_clusterable_object_index_ranges(cluster);
+    for (var i = ranges.first_point_light_index_offset; i < ranges.first_reflection_probe_index_offset; i++) {
+        let id = clustering::get_clusterable_object_id(i);
+        let light = &clustered_lights.data[id];
+        let spot = i >= ranges.first_spot_light_index_offset;
+        let hit_world = pomkit_hit_position(p.world_position.xyz, s.to_eye, s.n, s.receiver.depth, pomkit.params.depth_scale, s.uv_scale);
+        let v = self_shadow(s, normalize((*light).position_radius.xyz - hit_world));
+        out.fetches += u32(v.y);
+        var map = 1.0;
+        if receiver && ((*light).flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            if spot {
+                map = shadows::fetch_spot_shadow(id, p.world_position, p.world_normal, (*light).shadow_map_near_z, p.frag_coord.xy);
+            } else {
+                map = shadows::fetch_point_shadow(id, p.world_position, p.world_normal, p.frag_coord.xy);
             }
-            if i == 0u {
-                out.visibility = vis;
-            }
-            if vis < 1.0 {
-                var shadow_map = 1.0;
-                if (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) != 0u
-                        && (lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-                    shadow_map = shadows::fetch_directional_shadow(i, pbr_input.world_position, pbr_input.world_normal, view_z, pbr_input.frag_coord.xy);
-                }
-                let direct = lighting::directional_light(i, &li, true) * shadow_map;
-                color = vec4<f32>(max(color.rgb - view.exposure * (1.0 - vis) * direct, vec3<f32>(0.0)), color.a);
+        }
+        let share = select(1.0 - map * v.x, map * (1.0 - v.x), maps_applied);
+        if share > 0.0 {
+#ifdef LIGHTMAP
+            let enable_diffuse = ((*light).flags & mesh_view_types::POINT_LIGHT_FLAGS_AFFECTS_LIGHTMAPPED_MESH_DIFFUSE_BIT) != 0u;
+#else
+            let enable_diffuse = true;
+#endif
+            if spot {
+                removed += share * lighting::spot_light(id, &li, enable_diffuse);
+            } else {
+                removed += share * lighting::point_light(id, &li, enable_diffuse, true);
             }
         }
     }
-    out.color = color;
-    out.pbr_input = pbr_input;
+#endif
+    out.color = vec4<f32>(max(out.color.rgb - view.exposure * removed, vec3<f32>(0.0)), out.color.a);
+#endif
     return out;
 }
 
+#ifdef POMKIT_CONSERVATIVE_DEPTH
+#ifdef POMKIT_PIXEL_DEPTH
+@early_depth_test(less_equal)
+#endif
+#endif
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> PomkitFragmentOutput {
     let s = trace_fragment(in);
@@ -347,30 +618,19 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> PomkitFr
 #ifdef POMKIT_PIXEL_DEPTH
     out.frag_depth = traced_depth(in, s);
 #endif
-    let traced = s.traced;
-    let hit = s.hit;
-    let full = lit(in, is_front, s, traced);
-    var color = full.color;
-    if traced && s.weight < 1.0 {
-        // The LOD fade blends the shaded colours of the full technique and the plain surface,
-        // as pomkit's own renderers do.
-        let plain = lit(in, is_front, s, false);
-        color = mix(plain.color, full.color, s.weight);
-    }
-    switch pomkit.debug {
-        case 1u: {
-            out.color = vec4<f32>(hit.uv, hit.depth, 1.0);
-        }
-        case 2u: {
-            out.color = vec4<f32>(f32(hit.fetches + full.fetches) / 64.0, s.weight, s.lod / 16.0, 1.0);
-        }
-        case 3u: {
-            out.color = vec4<f32>(full.visibility, s.weight, 0.0, 1.0);
-        }
-        default: {
-            out.color = pbr_functions::main_pass_post_lighting_processing(full.pbr_input, color);
-        }
-    }
+    var p = standard_input(in, is_front, s);
+    p.material.base_color = pbr_functions::alpha_discard(p.material, p.material.base_color);
+    apply_decals(&p);
+    let l = lit(in, s, p);
+#if POMKIT_DEBUG == 1
+    out.color = vec4<f32>(s.hit.uv, s.hit.depth, 1.0);
+#else if POMKIT_DEBUG == 2
+    out.color = vec4<f32>(f32(s.fetches + l.fetches) / 64.0, s.weight, s.lod / 16.0, 1.0);
+#else if POMKIT_DEBUG == 3
+    out.color = vec4<f32>(l.visibility, s.weight, 0.0, 1.0);
+#else
+    out.color = pbr_functions::main_pass_post_lighting_processing(p, l.color);
+#endif
     return out;
 }
 

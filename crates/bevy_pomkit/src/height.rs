@@ -1,9 +1,10 @@
 //! Height resources from a Bevy [`Image`]: the textures pomkit's shader library reads, built on
 //! the CPU by pomkit-core (the same maps pomkit's GPU passes build, see ARCHITECTURE.md).
 //!
-//! - `heights`: `Rgba16Float` with a full mip chain; R = depth d in [0, 1] (0 the surface, 1 the
-//!   deepest point), G = the parallax value `clamp(n_z * d, 0, 1)` that the `parallax`
-//!   technique reads.
+//! - `heights`: a full mip chain of depth d in [0, 1] (0 the surface, 1 the deepest point) in
+//!   red: `R16Float`, or for a material drawn with the `iterative` technique `Rg16Float` with
+//!   the parallax value `clamp(n_z * d, 0, 1)` that it reads in green. The tracers read this
+//!   texture at every step, and a one-channel texture is the cheapest to filter.
 //! - `pyramid`: the maximum-height (minimum-depth) pyramid of the exact tracer, padded to powers
 //!   of two; mip `l` holds level `l` in its top-left corner, in red. `R32Float`, or for a
 //!   material drawn with the `cone` technique `Rg32Float` with the conservative cone ratios of
@@ -195,7 +196,7 @@ pub fn depths_from_image(image: &Image, kind: MapKind, channel: Channel) -> Resu
 
 /// The three textures of a height resource, as Bevy images.
 pub struct HeightImages {
-    /// Depth (R) and parallax value (G), all mips.
+    /// Depth (R) and, for `iterative`, the parallax value (G), all mips.
     pub heights: Image,
     /// Maximum-height pyramid.
     pub pyramid: Image,
@@ -204,14 +205,17 @@ pub struct HeightImages {
 }
 
 /// Builds the textures of `field` for tracing with `edges` at `depth_scale` (UV units; the
-/// normals and the parallax values depend on it), with an `R32Float` pyramid (no cones).
+/// normals depend on it), with an `R32Float` pyramid (no cones) and `R16Float` heights (no
+/// parallax values).
 #[must_use]
 pub fn height_images(field: &HeightField, edges: EdgeMode, depth_scale: f32) -> HeightImages {
-    height_images_with(field, edges, depth_scale, None)
+    height_images_with(field, edges, depth_scale, None, false)
 }
 
 /// [`height_images`], and if `cones` is given (built from `field` with `edges`: checked), an
-/// `Rg32Float` pyramid carrying them in mip 0's green for the `cone` technique.
+/// `Rg32Float` pyramid carrying them in mip 0's green for the `cone` technique; with
+/// `parallax`, `Rg16Float` heights carrying the parallax values (which depend on `depth_scale`)
+/// in green for the `iterative` technique.
 ///
 /// # Panics
 /// If `cones` is not `field`'s size or was built for another edge mode (a caller's bug: build
@@ -222,6 +226,7 @@ pub fn height_images_with(
     edges: EdgeMode,
     depth_scale: f32,
     cones: Option<&pomkit_core::cone::ConeMap>,
+    parallax: bool,
 ) -> HeightImages {
     let (w, h) = (field.width(), field.height());
     if let Some(c) = cones {
@@ -229,17 +234,22 @@ pub fn height_images_with(
     }
     let surface = Surface::new(field.clone(), edges, depth_scale);
     let mips = surface.mips();
-    let parallax = surface.parallax_mips();
+    let values = parallax.then(|| surface.parallax_mips());
     let mut bytes = Vec::new();
     for k in 0..mips.len() {
-        let (d, g) = (mips.level(k), parallax.level(k));
-        for (&dv, &gv) in d.depths().iter().zip(g.depths()) {
-            for v in [dv, gv, 0.0, 0.0] {
-                bytes.extend_from_slice(&f32_to_f16(v).to_le_bytes());
+        let d = mips.level(k).depths();
+        match values {
+            Some(v) => {
+                for (&dv, &gv) in d.iter().zip(v.level(k).depths()) {
+                    bytes.extend_from_slice(&f32_to_f16(dv).to_le_bytes());
+                    bytes.extend_from_slice(&f32_to_f16(gv).to_le_bytes());
+                }
             }
+            None => d.iter().for_each(|&dv| bytes.extend_from_slice(&f32_to_f16(dv).to_le_bytes())),
         }
     }
-    let mut heights = image(w, h, mips.len() as u32, TextureFormat::Rgba16Float, bytes);
+    let format = if parallax { TextureFormat::Rg16Float } else { TextureFormat::R16Float };
+    let mut heights = image(w, h, mips.len() as u32, format, bytes);
     heights.sampler = ImageSampler::Descriptor(sampler(edges));
 
     // The pyramid: power-of-two mips, level l in the top-left of mip l.
@@ -347,7 +357,7 @@ mod tests {
         let field = generate(Pattern::Cobblestones, 24, 20);
         let cones = ConeMap::conservative(&field, EdgeMode::Clamp);
         let plain = height_images(&field, EdgeMode::Clamp, 0.08);
-        let coned = height_images_with(&field, EdgeMode::Clamp, 0.08, Some(&cones));
+        let coned = height_images_with(&field, EdgeMode::Clamp, 0.08, Some(&cones), false);
         assert_eq!(plain.pyramid.texture_descriptor.format, TextureFormat::R32Float);
         assert_eq!(coned.pyramid.texture_descriptor.format, TextureFormat::Rg32Float);
         let levels = plain.pyramid.texture_descriptor.mip_level_count;

@@ -160,6 +160,17 @@ impl Plugin for PomkitPlugin {
             .init_resource::<HeightMaps>()
             .add_systems(PostUpdate, (build_height_maps, check_meshes));
     }
+
+    fn finish(&self, app: &mut App) {
+        // Conservative depth for pixel depth offset, where the device takes it.
+        if let Some(render_app) = app.get_sub_app(bevy::render::RenderApp)
+            && let Some(device) = render_app.world().get_resource::<bevy::render::renderer::RenderDevice>()
+        {
+            let supported =
+                device.features().contains(bevy::render::render_resource::WgpuFeatures::SHADER_EARLY_DEPTH_TEST);
+            material::CONSERVATIVE_DEPTH.store(supported, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
 }
 
 /// What was built for one material, so that a rebuild happens only when an input changed.
@@ -172,6 +183,8 @@ struct Built {
     depth_scale_bits: u32,
     /// Whether the pyramid carries cone ratios (materials drawn with `cone`).
     cones: bool,
+    /// Whether the heights carry parallax values (materials drawn with `iterative`).
+    parallax: bool,
 }
 
 /// Height resources of the materials in use: what each was built from, and which inputs were
@@ -261,7 +274,11 @@ fn image_name(server: Option<&AssetServer>, id: AssetId<Image>) -> String {
 
 /// Builds (or rebuilds) the height resources of every material whose height map, map kind,
 /// channel, edge mode or depth scale changed, and reports bad inputs in the log.
+/// Point and spot lights (whose self-shadows a material's shader carries only where some exist).
+type PointOrSpot = Or<(With<PointLight>, With<SpotLight>)>;
+
 fn build_height_maps(
+    point_lights: Query<(), PointOrSpot>,
     mut materials: ResMut<Assets<PomkitMaterial>>,
     mut images: ResMut<Assets<Image>>,
     mut image_events: MessageReader<AssetEvent<Image>>,
@@ -288,6 +305,7 @@ fn build_height_maps(
             edges: e.edges,
             depth_scale_bits: e.depth_scale.to_bits(),
             cones: e.technique == Technique::Cone,
+            parallax: e.technique == Technique::Iterative,
         };
         let stale = maps.built.get(&id) != Some(&want) || changed.contains(&want.source);
         if stale {
@@ -324,7 +342,13 @@ fn build_height_maps(
                             // cores): only for materials that step on them.
                             let cones =
                                 want.cones.then(|| pomkit_core::cone::ConeMap::conservative(&field, want.edges));
-                            let built = height::height_images_with(&field, want.edges, depth_scale, cones.as_ref());
+                            let built = height::height_images_with(
+                                &field,
+                                want.edges,
+                                depth_scale,
+                                cones.as_ref(),
+                                want.parallax,
+                            );
                             Ok(maps.store(&mut images, &want, cached, built))
                         }
                         Err(e) => {
@@ -352,6 +376,23 @@ fn build_height_maps(
             }
         }
         maps.built.insert(id, want);
+    }
+    // The pipeline key follows the base material's textures, and whether the world has point
+    // or spot lights.
+    let any_point_lights = !point_lights.is_empty();
+    let stale: Vec<_> = materials
+        .iter()
+        .filter(|(_, m)| {
+            m.extension.base_textures != material::base_textures(&m.base)
+                || m.extension.point_lights != any_point_lights
+        })
+        .map(|(id, _)| id)
+        .collect();
+    for id in stale {
+        if let Some(mut m) = materials.get_mut(id) {
+            m.extension.base_textures = material::base_textures(&m.base);
+            m.extension.point_lights = any_point_lights;
+        }
     }
     // Forget removed materials, and textures no material uses any more.
     maps.built.retain(|id, _| materials.contains(*id));

@@ -15,9 +15,11 @@ use bevy::render::render_resource::{
 use bevy::render::texture::GpuImage;
 use bevy::shader::{ShaderDefVal, ShaderRef};
 use pomkit_core::EdgeMode;
+use pomkit_core::shadow::ShadowMode;
 use pomkit_core::shadow::ShadowParams;
 use pomkit_core::trace::{Technique, TraceParams};
-use pomkit_gpu::library::{ParamError, PomkitParams};
+use pomkit_gpu::library::{ParamError, PomkitParams, shadow_index, technique_index};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::MATERIAL_SHADER;
 use crate::height::{Channel, MapKind};
@@ -105,6 +107,12 @@ pub struct Pomkit {
     /// Tangent-space normals; built by the plugin.
     #[texture(104)]
     pub(crate) normal_texture: Option<Handle<Image>>,
+    /// Which of the base material's textures exist (`texture_bits`); kept up to date by the
+    /// plugin, for the pipeline key.
+    pub(crate) base_textures: u8,
+    /// Whether the world has point or spot lights; kept up to date by the plugin, for the
+    /// pipeline key.
+    pub(crate) point_lights: bool,
 }
 
 impl Pomkit {
@@ -129,6 +137,8 @@ impl Pomkit {
             heights: None,
             pyramid: None,
             normal_texture: None,
+            base_textures: 0,
+            point_lights: false,
         }
     }
 
@@ -171,29 +181,27 @@ impl Pomkit {
 
 /// Flags of [`PomkitUniform::flags`].
 const FLAG_READY: u32 = 1;
-const FLAG_NORMALS: u32 = 2;
-const FLAG_PIXEL_DEPTH: u32 = 4;
 
 /// The uniform at binding 100 of the material: the library's `PomkitParams` (64 bytes, written
-/// by pomkit's own serializer) and the extension's flags.
+/// by pomkit's own serializer) and the extension's flags. Everything else the shader needs to
+/// know is a pipeline specialisation ([`PomkitKey`]).
 #[derive(Clone, Copy, Debug, Default, ShaderType)]
 pub struct PomkitUniform {
     /// `PomkitParams` as 16 words.
     pub params: [UVec4; 4],
-    /// Bit 0: textures built and parameters valid (else the plain standard material); bit 1:
-    /// shade with the height map's normals; bit 2: pixel depth offset.
+    /// Bit 0: textures built and parameters valid (else the plain standard material).
     pub flags: u32,
-    /// [`PomkitDebug`] as an index.
-    pub debug: u32,
     /// Padding.
     pub pad0: u32,
     /// Padding.
     pub pad1: u32,
+    /// Padding.
+    pub pad2: u32,
 }
 
 impl AsBindGroupShaderType<PomkitUniform> for Pomkit {
     fn as_bind_group_shader_type(&self, images: &RenderAssets<GpuImage>) -> PomkitUniform {
-        let mut out = PomkitUniform { debug: self.debug.index(), ..Default::default() };
+        let mut out = PomkitUniform::default();
         let present = |h: &Option<Handle<Image>>| h.as_ref().is_some_and(|h| images.get(h).is_some());
         let params = self.params();
         let bytes = match &params {
@@ -207,28 +215,138 @@ impl AsBindGroupShaderType<PomkitUniform> for Pomkit {
         if params.is_ok() && present(&self.heights) && present(&self.pyramid) && present(&self.normal_texture) {
             out.flags |= FLAG_READY;
         }
-        if self.normals {
-            out.flags |= FLAG_NORMALS;
-        }
-        if self.pixel_depth_offset {
-            out.flags |= FLAG_PIXEL_DEPTH;
-        }
         out
     }
 }
 
-/// The pipeline key: where the fragment stage writes the traced depth.
+/// Which of the standard material's textures a material has (bits of [`PomkitKey::textures`]).
+pub(crate) mod texture_bits {
+    /// `base_color_texture`.
+    pub const BASE_COLOR: u8 = 1;
+    /// `emissive_texture`.
+    pub const EMISSIVE: u8 = 2;
+    /// `metallic_roughness_texture`.
+    pub const METALLIC_ROUGHNESS: u8 = 4;
+    /// `occlusion_texture`.
+    pub const OCCLUSION: u8 = 8;
+}
+
+/// The bits of [`texture_bits`] for the textures `base` has.
+pub(crate) fn base_textures(base: &bevy::pbr::StandardMaterial) -> u8 {
+    use texture_bits as b;
+    let mut bits = 0;
+    for (present, bit) in [
+        (base.base_color_texture.is_some(), b::BASE_COLOR),
+        (base.emissive_texture.is_some(), b::EMISSIVE),
+        (base.metallic_roughness_texture.is_some(), b::METALLIC_ROUGHNESS),
+        (base.occlusion_texture.is_some(), b::OCCLUSION),
+    ] {
+        if present {
+            bits |= bit;
+        }
+    }
+    bits
+}
+
+/// The pipeline key: every option the shader is specialised for, so that what a material does
+/// not use is not in its shader (docs/BENCHMARKS.md, Bevy: a GPU that runs both sides of every
+/// branch, as Mesa's lavapipe does, paid for all of it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PomkitKey {
     /// Pixel depth offset on.
     pub pixel_depth_offset: bool,
     /// And in directional lights' shadow maps.
     pub shadow_pixel_depth: bool,
+    /// The technique, as the library's `POMKIT_*` constant.
+    pub technique: u8,
+    /// The self-shadow mode, as the library's `POMKIT_SHADOW_*` constant.
+    pub shadow: u8,
+    /// Shade with the height map's normals.
+    pub normals: bool,
+    /// The LOD fade has a band to fade over (`lod_threshold` is finite).
+    pub lod_fade: bool,
+    /// [`PomkitDebug`] as an index.
+    pub debug: u8,
+    /// The standard material's textures that exist (the plugin copies them from the base
+    /// material).
+    pub textures: u8,
+    /// The world has point or spot lights (the plugin keeps this up to date): self-shadows from
+    /// them are in the shader only then.
+    pub point_lights: bool,
 }
 
 impl From<&Pomkit> for PomkitKey {
     fn from(m: &Pomkit) -> Self {
-        Self { pixel_depth_offset: m.pixel_depth_offset, shadow_pixel_depth: m.shadow_pixel_depth }
+        // A material whose parameters are refused draws plain: trace nothing.
+        let (technique, shadow) =
+            if m.params().is_ok() { (m.technique, m.shadow.mode) } else { (Technique::Flat, ShadowMode::None) };
+        Self {
+            pixel_depth_offset: m.pixel_depth_offset,
+            shadow_pixel_depth: m.shadow_pixel_depth,
+            technique: technique_index(technique) as u8,
+            shadow: shadow_index(shadow) as u8,
+            normals: m.normals,
+            lod_fade: m.lod_threshold.is_finite() && m.lod_threshold < MAX_LOD_THRESHOLD,
+            debug: m.debug.index() as u8,
+            textures: m.base_textures,
+            point_lights: m.point_lights,
+        }
+    }
+}
+
+/// A LOD threshold at or above this mip level never fades (no height map has that many levels).
+const MAX_LOD_THRESHOLD: f32 = 64.0;
+
+/// Whether the render device takes `@early_depth_test` (wgpu's `SHADER_EARLY_DEPTH_TEST`), set by
+/// the plugin when the renderer starts. With it, the pixel depth offset passes declare their
+/// written depth conservative (never nearer than the polygon's), so a GPU keeps rejecting
+/// hidden fragments before they are traced.
+pub(crate) static CONSERVATIVE_DEPTH: AtomicBool = AtomicBool::new(false);
+
+impl PomkitKey {
+    /// The shader definitions of this key, for a pipeline whose fragment stage already has
+    /// `existing` (Bevy's own, for the standard material and the view).
+    fn shader_defs(&self, existing: &[ShaderDefVal], pixel_depth: bool) -> Vec<ShaderDefVal> {
+        let has = |name: &str| existing.iter().any(|d| shader_def_name(d) == name);
+        let mut defs = vec![
+            ShaderDefVal::UInt("POMKIT_TECHNIQUE".into(), u32::from(self.technique)),
+            ShaderDefVal::UInt("POMKIT_SHADOW_MODE".into(), u32::from(self.shadow)),
+            ShaderDefVal::UInt("POMKIT_DEBUG".into(), u32::from(self.debug)),
+        ];
+        let mut flag = |on: bool, name: &str| {
+            if on {
+                defs.push(name.into());
+            }
+        };
+        flag(self.normals, "POMKIT_NORMALS");
+        flag(self.lod_fade, "POMKIT_LOD_FADE");
+        flag(self.point_lights && self.shadow != 0, "POMKIT_POINT_LIGHTS");
+        flag(pixel_depth, "POMKIT_PIXEL_DEPTH");
+        flag(pixel_depth && CONSERVATIVE_DEPTH.load(Ordering::Relaxed), "POMKIT_CONSERVATIVE_DEPTH");
+        flag(pixel_depth || has("UNCLIPPED_DEPTH_ORTHO_EMULATION"), "POMKIT_FRAG_DEPTH");
+        use texture_bits as b;
+        flag(self.textures & b::BASE_COLOR != 0, "POMKIT_TEX_BASE_COLOR");
+        flag(self.textures & b::EMISSIVE != 0, "POMKIT_TEX_EMISSIVE");
+        flag(self.textures & b::METALLIC_ROUGHNESS != 0, "POMKIT_TEX_METALLIC_ROUGHNESS");
+        flag(self.textures & b::OCCLUSION != 0, "POMKIT_TEX_OCCLUSION");
+        // What pomkit's own reading of the standard material leaves out: Bevy's reads it.
+        let bevy_input = [
+            "STANDARD_MATERIAL_CLEARCOAT",
+            "STANDARD_MATERIAL_ANISOTROPY",
+            "STANDARD_MATERIAL_DIFFUSE_OR_SPECULAR_TRANSMISSION",
+            "PBR_SPECULAR_TEXTURES_SUPPORTED",
+        ]
+        .into_iter()
+        .any(&has)
+            || existing.iter().any(|d| {
+                let n = shader_def_name(d);
+                n.starts_with("STANDARD_MATERIAL_") && n.ends_with("_UV_B")
+            });
+        flag(bevy_input, "POMKIT_BEVY_INPUT");
+        // Light that needs the shadow maps inside Bevy's lighting (transmitted light, contact
+        // shadows) keeps them there.
+        flag(has("STANDARD_MATERIAL_DIFFUSE_TRANSMISSION") || has("CONTACT_SHADOWS"), "POMKIT_BEVY_SHADOW_MAPS");
+        defs
     }
 }
 
@@ -238,6 +356,10 @@ impl MaterialExtension for Pomkit {
     }
 
     fn prepass_fragment_shader() -> ShaderRef {
+        ShaderRef::Handle(MATERIAL_SHADER)
+    }
+
+    fn deferred_fragment_shader() -> ShaderRef {
         ShaderRef::Handle(MATERIAL_SHADER)
     }
 
@@ -252,75 +374,81 @@ impl MaterialExtension for Pomkit {
         let directional_shadow = key.mesh_key.contains(MeshPipelineKey::UNCLIPPED_DEPTH_ORTHO);
         let pixel_depth = k.pixel_depth_offset && (k.shadow_pixel_depth || !directional_shadow);
         let prepass = descriptor.vertex.shader_defs.iter().any(|d| d == &ShaderDefVal::from("PREPASS_PIPELINE"));
-        if pixel_depth {
-            descriptor.vertex.shader_defs.push("POMKIT_PIXEL_DEPTH".into());
-            if let Some(f) = descriptor.fragment.as_mut() {
-                f.shader_defs.push("POMKIT_PIXEL_DEPTH".into());
-            }
+        if prepass && pixel_depth {
+            // The prepass and shadow passes trace too, to write the traced depth: they need the
+            // normals and tangents Bevy's prepass vertex stage passes on only for a normal
+            // prepass, and a fragment stage even where no colour target is written.
+            add_prepass_fragment(descriptor, layout)?;
         }
-        if !prepass || !pixel_depth {
-            return Ok(());
-        }
-        // The prepass and shadow passes trace too, to write the traced depth: they need the
-        // normals and tangents Bevy's prepass vertex stage passes on only for a normal prepass,
-        // and a fragment stage even where no colour target is written.
-        let mut defs = descriptor.vertex.shader_defs.clone();
-        let has = |defs: &[ShaderDefVal], name: &str| defs.iter().any(|d| d == &ShaderDefVal::from(name));
-        let mut attributes: Vec<VertexAttributeDescriptor> = Vec::new();
-        let by_location = [
-            (0, Mesh::ATTRIBUTE_POSITION),
-            (1, Mesh::ATTRIBUTE_UV_0),
-            (2, Mesh::ATTRIBUTE_UV_1),
-            (3, Mesh::ATTRIBUTE_NORMAL),
-            (4, Mesh::ATTRIBUTE_TANGENT),
-            (5, Mesh::ATTRIBUTE_JOINT_INDEX),
-            (6, Mesh::ATTRIBUTE_JOINT_WEIGHT),
-            (7, Mesh::ATTRIBUTE_COLOR),
-        ];
-        let used: Vec<u32> = descriptor
-            .vertex
-            .buffers
-            .first()
-            .map(|b| b.attributes.iter().map(|a| a.shader_location).collect())
-            .unwrap_or_default();
-        for (location, attribute) in by_location {
-            let wanted =
-                used.contains(&location) || ((location == 3 || location == 4) && layout.0.contains(attribute.id));
-            if wanted {
-                attributes.push(attribute.at_shader_location(location));
-            }
-        }
-        if !has(&defs, "NORMAL_PREPASS_OR_DEFERRED_PREPASS") {
-            defs.push("NORMAL_PREPASS_OR_DEFERRED_PREPASS".into());
-            if layout.0.contains(Mesh::ATTRIBUTE_NORMAL) && !has(&defs, "VERTEX_NORMALS") {
-                defs.push("VERTEX_NORMALS".into());
-            }
-            if layout.0.contains(Mesh::ATTRIBUTE_TANGENT) && !has(&defs, "VERTEX_TANGENTS") {
-                defs.push("VERTEX_TANGENTS".into());
-            }
-        }
-        let buffer = layout.0.get_layout(&attributes)?;
-        descriptor.vertex.buffers = vec![buffer];
-        descriptor.vertex.shader_defs.clone_from(&defs);
-        match descriptor.fragment.as_mut() {
-            Some(f) => {
-                for d in defs {
-                    if !has(&f.shader_defs, &shader_def_name(&d)) {
-                        f.shader_defs.push(d);
-                    }
-                }
-            }
-            None => {
-                descriptor.fragment = Some(FragmentState {
-                    shader: MATERIAL_SHADER,
-                    shader_defs: defs,
-                    entry_point: None,
-                    targets: Vec::new(),
-                });
-            }
+        if let Some(f) = descriptor.fragment.as_mut() {
+            let defs = k.shader_defs(&f.shader_defs, pixel_depth);
+            f.shader_defs.extend(defs);
         }
         Ok(())
     }
+}
+
+/// Makes a prepass or shadow pass pipeline trace: the vertex stage passes on normals and
+/// tangents, and a fragment stage exists.
+fn add_prepass_fragment(
+    descriptor: &mut RenderPipelineDescriptor,
+    layout: &MeshVertexBufferLayoutRef,
+) -> Result<(), SpecializedMeshPipelineError> {
+    let mut defs = descriptor.vertex.shader_defs.clone();
+    let has = |defs: &[ShaderDefVal], name: &str| defs.iter().any(|d| d == &ShaderDefVal::from(name));
+    let mut attributes: Vec<VertexAttributeDescriptor> = Vec::new();
+    let by_location = [
+        (0, Mesh::ATTRIBUTE_POSITION),
+        (1, Mesh::ATTRIBUTE_UV_0),
+        (2, Mesh::ATTRIBUTE_UV_1),
+        (3, Mesh::ATTRIBUTE_NORMAL),
+        (4, Mesh::ATTRIBUTE_TANGENT),
+        (5, Mesh::ATTRIBUTE_JOINT_INDEX),
+        (6, Mesh::ATTRIBUTE_JOINT_WEIGHT),
+        (7, Mesh::ATTRIBUTE_COLOR),
+    ];
+    let used: Vec<u32> = descriptor
+        .vertex
+        .buffers
+        .first()
+        .map(|b| b.attributes.iter().map(|a| a.shader_location).collect())
+        .unwrap_or_default();
+    for (location, attribute) in by_location {
+        let wanted = used.contains(&location) || ((location == 3 || location == 4) && layout.0.contains(attribute.id));
+        if wanted {
+            attributes.push(attribute.at_shader_location(location));
+        }
+    }
+    if !has(&defs, "NORMAL_PREPASS_OR_DEFERRED_PREPASS") {
+        defs.push("NORMAL_PREPASS_OR_DEFERRED_PREPASS".into());
+        if layout.0.contains(Mesh::ATTRIBUTE_NORMAL) && !has(&defs, "VERTEX_NORMALS") {
+            defs.push("VERTEX_NORMALS".into());
+        }
+        if layout.0.contains(Mesh::ATTRIBUTE_TANGENT) && !has(&defs, "VERTEX_TANGENTS") {
+            defs.push("VERTEX_TANGENTS".into());
+        }
+    }
+    let buffer = layout.0.get_layout(&attributes)?;
+    descriptor.vertex.buffers = vec![buffer];
+    descriptor.vertex.shader_defs.clone_from(&defs);
+    match descriptor.fragment.as_mut() {
+        Some(f) => {
+            for d in defs {
+                if !has(&f.shader_defs, &shader_def_name(&d)) {
+                    f.shader_defs.push(d);
+                }
+            }
+        }
+        None => {
+            descriptor.fragment = Some(FragmentState {
+                shader: MATERIAL_SHADER,
+                shader_defs: defs,
+                entry_point: None,
+                targets: Vec::new(),
+            });
+        }
+    }
+    Ok(())
 }
 
 fn shader_def_name(d: &ShaderDefVal) -> String {

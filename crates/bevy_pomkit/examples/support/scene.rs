@@ -25,6 +25,9 @@ pub enum Method {
     Pomkit(Technique),
     /// Bevy's own `StandardMaterial` parallax.
     Bevy(ParallaxMappingMethod),
+    /// Bevy's `StandardMaterial` with the same albedo and no depth map: the cost of the frame
+    /// without any parallax.
+    Plain,
 }
 
 impl Method {
@@ -33,10 +36,10 @@ impl Method {
         match name {
             "bevy-occlusion" => Ok(Self::Bevy(ParallaxMappingMethod::Occlusion)),
             "bevy-relief" => Ok(Self::Bevy(ParallaxMappingMethod::Relief { max_steps: 5 })),
-            _ => name
-                .parse::<Technique>()
-                .map(Self::Pomkit)
-                .map_err(|e| format!("{e} (or bevy-occlusion, bevy-relief for Bevy's own parallax mapping)")),
+            "bevy-plain" => Ok(Self::Plain),
+            _ => name.parse::<Technique>().map(Self::Pomkit).map_err(|e| {
+                format!("{e} (or bevy-occlusion, bevy-relief for Bevy's own parallax mapping, bevy-plain for none)")
+            }),
         }
     }
 
@@ -46,6 +49,7 @@ impl Method {
             Self::Pomkit(t) => t.name().to_owned(),
             Self::Bevy(ParallaxMappingMethod::Occlusion) => "bevy-occlusion".to_owned(),
             Self::Bevy(ParallaxMappingMethod::Relief { .. }) => "bevy-relief".to_owned(),
+            Self::Plain => "bevy-plain".to_owned(),
         }
     }
 }
@@ -184,14 +188,16 @@ pub fn spawn(world: &mut World, target: Option<RenderTarget>, opts: &SceneOption
             world.spawn((Mesh3d(floor_mesh), MeshMaterial3d(floor)));
             c
         }
-        Method::Bevy(method) => {
-            let depth = world.resource_mut::<Assets<Image>>().add(bevy_depth_map(opts.pattern, opts.size));
-            let standard = StandardMaterial {
-                depth_map: Some(depth),
-                parallax_depth_scale: opts.depth_scale,
-                parallax_mapping_method: method,
-                max_parallax_layer_count: 32.0,
-                ..base
+        Method::Bevy(_) | Method::Plain => {
+            let standard = match opts.method {
+                Method::Bevy(method) => StandardMaterial {
+                    depth_map: Some(world.resource_mut::<Assets<Image>>().add(bevy_depth_map(opts.pattern, opts.size))),
+                    parallax_depth_scale: opts.depth_scale,
+                    parallax_mapping_method: method,
+                    max_parallax_layer_count: 32.0,
+                    ..base
+                },
+                _ => base,
             };
             let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
             let cube = materials.add(standard.clone());
