@@ -163,8 +163,8 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     if weight > 0.0 {
         let ray = pomkit_view_ray(pomkit_to_tangent(f, in.world - frame.eye.xyz), uv_scale);
         hit = pomkit_trace(technique, heights, pyramid, samp, params, in.uv, ray, lod);
-        // Lift the receiver onto the surface the shadow marches (one fetch): without it, steep
-        // slopes shadow themselves in dashes wherever the hit lies below that surface.
+        // Lift the hit onto the surface (one fetch): steep parallax stops up to one layer
+        // below it, and the lifted point shades there (pomkit_shadow lifts its own receiver).
         hit = pomkit_lift_to_surface(heights, samp, hit, lod);
         // Fade toward the untraced point.
         hit = PomkitHit(mix(in.uv, hit.uv, weight), hit.depth * weight, hit.fetches);

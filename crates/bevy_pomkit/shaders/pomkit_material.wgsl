@@ -20,7 +20,7 @@
 }
 #import pomkit::library::{
     PomkitParams, PomkitHit, pomkit_tangent_frame, pomkit_uv_scale, pomkit_view_ray, pomkit_light_ray,
-    pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_lift_to_surface, pomkit_shadow,
+    pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_shadow,
     pomkit_hit_position, pomkit_pixel_depth, pomkit_safe_normalize, POMKIT_FLAT, POMKIT_NORMAL,
     POMKIT_SHADOW_NONE,
 }
@@ -98,9 +98,6 @@ struct Traced {
     ready: bool,
     /// The hit, in the material's UV space (after `uv_transform`), after the LOD band's blend.
     hit: PomkitHit,
-    /// The point self-shadows are traced from: the hit lifted onto the height surface the
-    /// shadow march reads.
-    receiver: PomkitHit,
     /// The entry UV in the same space.
     uv: vec2<f32>,
     /// Screen derivatives of the entry UV: every texture is sampled at the hit with these, the
@@ -165,7 +162,6 @@ fn trace_fragment(in: VertexOutput) -> Traced {
     s.uv = uv;
     s.translation = m3[2].xy;
     s.hit = PomkitHit(uv, 0.0, 0u);
-    s.receiver = s.hit;
     // Gradients in uniform control flow, before any branch (HLSL's tex2Dgrad in the published
     // POM shaders, docs/REFERENCES.md).
     s.duv_dx = dpdx(uv);
@@ -221,14 +217,6 @@ fn trace_fragment(in: VertexOutput) -> Traced {
         hit = PomkitHit(mix(uv, hit.uv, s.weight), hit.depth * s.weight, hit.fetches);
 #endif
         s.hit = hit;
-        s.receiver = hit;
-#if POMKIT_SHADOW_MODE != 0
-        // Self-shadows march the height surface sampled at mip `lod`: a hit below it (steep's
-        // layers, pom's chords under convex tops, exact's mip-0 surface) would shadow itself in
-        // dashes along the tops (docs/REFERENCES.md, Self-shadows).
-        s.receiver = pomkit_lift_to_surface(pomkit_heights, pomkit_sampler, hit, s.lod);
-        s.fetches += 1u;
-#endif
     }
 #endif
 #endif
@@ -504,7 +492,7 @@ fn self_shadow(s: Traced, l_world: vec3<f32>) -> vec2<f32> {
     if !(dot(s.n, l_world) > 0.0) || !s.ready || !displaces() {
         return vec2<f32>(select(1.0, 0.0, s.ready && displaces()), 0.0);
     }
-    let sh = pomkit_shadow(pomkit_heights, pomkit_pyramid, pomkit_sampler, params(), s.receiver.uv, s.receiver.depth, pomkit_light_ray(ray_terms(l_world, s), vec2<f32>(1.0)), s.lod);
+    let sh = pomkit_shadow(pomkit_heights, pomkit_pyramid, pomkit_sampler, params(), s.hit.uv, s.hit.depth, pomkit_light_ray(ray_terms(l_world, s), vec2<f32>(1.0)), s.lod);
     return vec2<f32>(sh.visibility, f32(sh.fetches));
 }
 
@@ -575,7 +563,7 @@ fn lit(in: VertexOutput, s: Traced, p: pbr_types::PbrInput) -> Lit {
         let id = clustering::get_clusterable_object_id(i);
         let light = &clustered_lights.data[id];
         let spot = i >= ranges.first_spot_light_index_offset;
-        let hit_world = pomkit_hit_position(p.world_position.xyz, s.to_eye, s.n, s.receiver.depth, pomkit.params.depth_scale, s.uv_scale);
+        let hit_world = pomkit_hit_position(p.world_position.xyz, s.to_eye, s.n, s.hit.depth, pomkit.params.depth_scale, s.uv_scale);
         let v = self_shadow(s, normalize((*light).position_radius.xyz - hit_world));
         out.fetches += u32(v.y);
         var map = 1.0;

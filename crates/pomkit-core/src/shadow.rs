@@ -73,15 +73,15 @@ impl std::str::FromStr for ShadowMode {
 
 impl ShadowMode {
     /// The most fetches one [`shadow`] call may make in this mode with `params` on `surface`:
-    /// 0 for `none` and `depth`; `max_samples - 1` for `hard` and `soft` (samples `1..n` with
-    /// `n <= max_samples <= MAX_SAMPLES`); for `exact`, the exact tracer's bound
+    /// 0 for `none` and `depth`; `max_samples` for `hard` and `soft` (the receiver's lift and
+    /// samples `1..n` with `n <= max_samples <= MAX_SAMPLES`); for `exact`, the exact tracer's bound
     /// ([`Surface::exact_fetch_bound`], which counts the fetch that lifts the receiver).
     #[must_use]
     pub fn fetch_bound(self, params: &TraceParams, surface: &Surface) -> u32 {
         let p = params.sanitized();
         match self {
             ShadowMode::None | ShadowMode::Depth => 0,
-            ShadowMode::Hard | ShadowMode::Soft => p.max_samples.saturating_sub(1),
+            ShadowMode::Hard | ShadowMode::Soft => p.max_samples,
             ShadowMode::Exact => Technique::Exact.fetch_bound(&p, surface),
         }
     }
@@ -160,7 +160,7 @@ pub enum ShadowStart {
 pub struct ShadowMarch {
     /// The receiver's UV, in its own tile where the edges wrap.
     pub uv: Vec2,
-    /// The receiver's depth, in `(0, 1]`.
+    /// The receiver's depth, in `(0, 1]`, lifted onto the surface at mip `lod`.
     pub depth: f32,
     /// UV offset per unit of depth climbed toward the light.
     pub s: Vec2,
@@ -186,11 +186,12 @@ impl ShadowMarch {
         self.depth * i as f32 / self.n as f32
     }
 
-    /// Marches the ray on `surface`, one sample at a time.
+    /// Marches the ray on `surface`, one sample at a time. The fetches count the receiver's
+    /// lift made by [`shadow_start`].
     #[must_use]
     pub fn run(&self, surface: &Surface) -> Shadow {
         let mut slope = f32::NEG_INFINITY;
-        let mut fetches = 0;
+        let mut fetches = 1;
         for i in 1..self.n {
             let t = self.climbed(i);
             let d = surface.depth(self.uv + self.s * t, self.lod);
@@ -278,6 +279,14 @@ pub fn shadow_start(
         // McGuire 2005's fur and grass: darker the deeper, no light ray.
         ShadowMode::Depth => done(1.0 - depth, 0),
         ShadowMode::Hard | ShadowMode::Soft => {
+            // The receiver lifted onto the surface the march reads (one fetch): a hit below it
+            // (steep parallax stops up to one layer deep, pom's linear segments cut under
+            // convex slopes, the exact hit lies on mip 0 while the march reads mip `lod`) would
+            // start the ray inside the relief and shadow itself in dashes along the tops.
+            let depth = depth.min(surface.depth(uv, p.lod));
+            if depth <= 0.0 {
+                return done(1.0, 1);
+            }
             // Samples at climbed depths t_i = depth * i / n, i = 1 .. n - 1: the last point lies
             // on the polygon's surface, which nothing rises above.
             let n = adaptive_samples(l.z, p.min_samples, p.max_samples);
@@ -304,6 +313,11 @@ pub fn shadow_start(
             // exact ray from there starts inside the relief and shadows itself in speckles, so
             // lift it onto the exact surface (one fetch), then a hair above it.
             let on_surface = depth.min(f.sample_bilinear(uv, surface.edges()));
+            if on_surface <= 0.0 {
+                // Lifted onto the polygon's surface, which nothing rises above (a walk from
+                // there would stop at once on the surface it starts on).
+                return done(1.0, 1);
+            }
             let eps = 1e-5;
             let z0 = (f64::from(on_surface) - eps).max(0.0);
             let o = DVec3::new(f64::from(uv.x) * size.0, f64::from(uv.y) * size.1, z0);
@@ -368,21 +382,30 @@ mod tests {
     }
 
     #[test]
-    fn exact_shadow_lifts_a_receiver_below_the_surface() {
-        // A flat surface at depth 0.5 with nothing above it: a receiver reported below it (as an
-        // approximate technique's hit can be) is lit, not shadowed by the surface it lies on.
-        let s = Surface::new(HeightField::constant(16, 16, 0.5), EdgeMode::Wrap, 0.1);
-        let p = ShadowParams { mode: ShadowMode::Exact, softness: 0.1 };
+    fn every_shadow_ray_lifts_a_receiver_below_the_surface() {
+        let modes = [ShadowMode::Hard, ShadowMode::Soft, ShadowMode::Exact];
         let light = Vec3::new(0.6, 0.2, 0.5);
-        for depth in [0.5, 0.55, 0.8] {
-            let sh = shadow(&s, Vec2::new(0.3, 0.7), depth, light, &p, &TraceParams::default());
-            assert_eq!(sh.visibility, 1.0, "receiver at depth {depth}");
+        let t = TraceParams::default();
+        for mode in modes {
+            let p = ShadowParams { mode, softness: 0.1 };
+            // A flat surface at depth 0.5 (or 0, the polygon's own) with nothing above it: a
+            // receiver reported below it (as an approximate technique's hit can be) is lit, not
+            // shadowed by the surface it lies on.
+            for level in [0.5, 0.0] {
+                let s = Surface::new(HeightField::constant(16, 16, level), EdgeMode::Wrap, 0.1);
+                for depth in [level, level + 0.05, 0.8] {
+                    let sh = shadow(&s, Vec2::new(0.3, 0.7), depth, light, &p, &t);
+                    assert_eq!(sh.visibility, 1.0, "{mode:?}: receiver at depth {depth} under a plane at {level}");
+                    assert!(sh.fetches <= mode.fetch_bound(&t, &s), "{mode:?}: {} fetches", sh.fetches);
+                }
+            }
+            // A real blocker still shadows: a wall toward the light, higher than the receiver.
+            let wall =
+                HeightField::from_depths(16, 16, (0..256).map(|i| if i % 16 == 8 { 0.0 } else { 0.5 }).collect())
+                    .expect("valid field");
+            let s = Surface::new(wall, EdgeMode::Wrap, 0.1);
+            let sh = shadow(&s, Vec2::new(6.5 / 16.0, 0.5), 0.55, Vec3::new(1.0, 0.0, 0.1), &p, &t);
+            assert_eq!(sh.visibility, 0.0, "{mode:?}");
         }
-        // A real blocker still shadows: a wall toward the light, higher than the receiver.
-        let wall = HeightField::from_depths(16, 16, (0..256).map(|i| if i % 16 == 8 { 0.0 } else { 0.5 }).collect())
-            .expect("valid field");
-        let s = Surface::new(wall, EdgeMode::Wrap, 0.1);
-        let sh = shadow(&s, Vec2::new(6.5 / 16.0, 0.5), 0.55, Vec3::new(1.0, 0.0, 0.1), &p, &TraceParams::default());
-        assert_eq!(sh.visibility, 0.0);
     }
 }

@@ -1086,11 +1086,10 @@ fn pomkit_trace_in_tile(technique: u32, heights: texture_2d<f32>, pyramid: textu
 }
 
 /// The hit lifted onto the height surface sampled at mip `lod`: its depth becomes the smaller
-/// of its own and the surface's at its UV (one fetch). Call it before `pomkit_shadow` with
-/// hard or soft shadows, which march that surface: a receiver below it (steep parallax stops
-/// up to one layer deep, pom's linear segments cut under convex slopes, `exact` hits mip 0
-/// while the march reads mip `lod`) shadows itself in contour lines and dashes along steep
-/// slopes.
+/// of its own and the surface's at its UV (one fetch). `pomkit_shadow` lifts its receiver
+/// itself; lift the hit you shade when the technique can stop below the surface (steep
+/// parallax stops up to one layer deep), so that its depth output and shading sit on the
+/// surface too.
 fn pomkit_lift_to_surface(heights: texture_2d<f32>, samp: sampler, hit: PomkitHit, lod: f32) -> PomkitHit {
     let d = pomkit_depth_at(heights, samp, hit.uv, lod);
     return PomkitHit(hit.uv, min(hit.depth, d), hit.fetches + 1u);
@@ -1098,7 +1097,7 @@ fn pomkit_lift_to_surface(heights: texture_2d<f32>, samp: sampler, hit: PomkitHi
 
 /// The receiver pomkit's own renderers shade and shadow from (pomkit-cpu and `render.wgsl`
 /// agree on it): `steep`'s hit lifted with `pomkit_lift_to_surface`, other techniques' hits
-/// unchanged. A host that wants no self-shadow acne at all lifts every technique's hit.
+/// unchanged.
 fn pomkit_receiver(technique: u32, heights: texture_2d<f32>, samp: sampler, hit: PomkitHit, lod: f32) -> PomkitHit {
     if technique != POMKIT_STEEP {
         return hit;
@@ -1297,7 +1296,9 @@ fn pomkit_trace_curved(technique: u32, heights: texture_2d<f32>, pyramid: textur
 /// tangent-space light vector; any length, z > 0 above the surface). Samples are read at mip
 /// `lod`, as the trace's. A zero or non-finite `light` gives 1; a light below the tangent plane
 /// gives 0 with no fetch (Tatarchuk 2006 skips the trace there; test the geometric N.L yourself
-/// to skip the call). `POMKIT_SHADOW_DEPTH` gives `1 - depth` with no fetch.
+/// to skip the call). `POMKIT_SHADOW_DEPTH` gives `1 - depth` with no fetch. Hard, soft and
+/// exact shadows lift the receiver onto the surface first (one fetch), so any technique's hit
+/// may be passed as it is.
 fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv_in: vec2<f32>, depth_in: f32, light: vec3<f32>, lod: f32) -> PomkitShadow {
     let l = pomkit_unit(light);
     if !(dot(l, l) > 0.0) {
@@ -1306,15 +1307,15 @@ fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampl
     if l.z <= 0.0 {
         return PomkitShadow(0.0, 0u);
     }
-    let depth = clamp(depth_in, 0.0, 1.0);
+    let receiver_depth = clamp(depth_in, 0.0, 1.0);
     let mode = params.shadow_mode;
-    if mode == POMKIT_SHADOW_NONE || depth <= 0.0 {
+    if mode == POMKIT_SHADOW_NONE || receiver_depth <= 0.0 {
         // Nothing lies above the polygon's surface: a point on it is never self-shadowed.
         return PomkitShadow(1.0, 0u);
     }
     if mode == POMKIT_SHADOW_DEPTH {
         // No shadow ray: darker the deeper the point, from lit tips to a black skin.
-        return PomkitShadow(1.0 - depth, 0u);
+        return PomkitShadow(1.0 - receiver_depth, 0u);
     }
     // The point in its own tile where the surface repeats (a visibility needs no tile back).
     let uv = uv_in - pomkit_entry_tile(uv_in, params.edges);
@@ -1326,7 +1327,12 @@ fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampl
         // bilinear surface; coarser mips differ from mip 0): an exact ray from there shadows
         // itself in speckles. Lift it onto the exact surface (one fetch), then a hair above it
         // (1e-5 of the depth range, as the CPU).
-        let on_surface = min(depth, pomkit_depth_at(heights, samp, uv, 0.0));
+        let on_surface = min(receiver_depth, pomkit_depth_at(heights, samp, uv, 0.0));
+        if on_surface <= 0.0 {
+            // Lifted onto the polygon's surface, which nothing rises above (a walk from there
+            // would stop at once on the surface it starts on).
+            return PomkitShadow(1.0, 1u);
+        }
         let eps = 1e-5;
         let z0 = max(on_surface - eps, 0.0);
         let o = vec3<f32>(uv * map.size, z0);
@@ -1334,8 +1340,16 @@ fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampl
         let walk = pomkit_exact_first_hit(heights, pyramid, map, o, d, min(eps, z0), z0);
         return PomkitShadow(select(1.0, 0.0, walk.t >= 0.0), walk.fetches + 1u);
     }
-    // Hard and soft: samples at climbed depths t_i = depth * i / n, i = 1 .. n - 1 (the last
-    // point lies on the polygon's surface, which nothing rises above).
+    // Hard and soft: the receiver lifted onto the surface the march reads (one fetch). A hit
+    // below it (steep parallax stops up to one layer deep, pom's linear segments cut under
+    // convex slopes, the exact hit lies on mip 0 while the march reads mip `lod`) would start
+    // the ray inside the relief and shadow itself in dashes along the tops.
+    let depth = min(receiver_depth, pomkit_depth_at(heights, samp, uv, lod));
+    if depth <= 0.0 {
+        return PomkitShadow(1.0, 1u);
+    }
+    // Samples at climbed depths t_i = depth * i / n, i = 1 .. n - 1 (the last point lies on the
+    // polygon's surface, which nothing rises above).
     let n = pomkit_adaptive_samples(l.z, params.min_samples, params.max_samples);
     let soft = mode == POMKIT_SHADOW_SOFT;
     let rho = max(params.softness, 1e-4);
@@ -1343,7 +1357,7 @@ fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampl
     // units) covered per unit climbed.
     let tan_theta = sqrt(max(1.0 - l.z * l.z, 0.0)) / l.z;
     let light_elevation = atan2(1.0, tan_theta);
-    var fetches = 0u;
+    var fetches = 1u;
     // The steepest rise of the profile above the receiver per unit climbed: the visibility falls
     // as a sample's elevation seen from the receiver, atan2(depth - d, t * tan_theta), rises,
     // and that rises with the slope (depth - d) / t, so the darkest sample is the steepest and

@@ -426,3 +426,60 @@ fn cones_come_back_with_set_cones_after_a_new_height_field() {
     let small = pomkit_core::cone::ConeMap::conservative(&HeightField::constant(4, 4, 0.5), edges);
     assert!(gs.set_cones(r.context(), 0, Some(&small)).is_err());
 }
+
+/// A truncated cone: a flat top of radius 0.2 at UV (0.5, 0.5), sides falling to the ground
+/// at radius 0.32, with a sharp convex rim (where pom's chords cut under the surface).
+fn mesa_field() -> HeightField {
+    let n = 64;
+    HeightField::from_height_fn(n, n, |x, y| {
+        let r = ((x as f32 + 0.5) / n as f32 - 0.5).hypot((y as f32 + 0.5) / n as f32 - 0.5);
+        ((0.32 - r) / 0.12).clamp(0.0, 1.0)
+    })
+}
+
+/// Self-shadow receivers lie on the surface the shadow ray marches, for every technique: a
+/// truncated cone under a low sun (15 degrees above the horizon) has no shadowed pixel on the
+/// side that faces the sun, on either renderer. Its height never rises with the distance from
+/// its axis, and along a ray toward the sun from a point whose outward direction has a positive
+/// component toward the sun that distance only grows, so the surface falls away under the ray:
+/// such a point is lit (the analytic answer). The shadow ray of a receiver left below the
+/// surface (pom's chords under the convex rim, steep's layers, a coarser mip) would start
+/// inside the relief and shadow it in dashes. The far side must still be shadowed.
+#[test]
+fn a_low_sun_leaves_every_face_that_looks_at_it_lit() {
+    let Some(g) = gpu() else { return };
+    let elevation = 15f32.to_radians();
+    // The quad lies in the XY plane with u along +X: a sun toward +X is a sun toward +u.
+    let sun = Vec3::new(elevation.cos(), 0.0, elevation.sin());
+    let cam = Camera { eye: Vec3::new(0.0, -1.3, 1.6), target: Vec3::ZERO, up: Vec3::Z, fov_y_deg: 45.0, ..Camera::default() };
+    let o = RenderOptions { width: 160, height: 160, aovs: true, ..Default::default() };
+    for technique in [Technique::Pom, Technique::Steep, Technique::Relief, Technique::Parallax, Technique::Exact] {
+        for mode in [ShadowMode::Hard, ShadowMode::Soft, ShadowMode::Exact] {
+            let mut s = one_object(Mesh::quad(Vec2::splat(2.0)), mesa_field(), technique, cam, sun);
+            s.materials[0].trace = TraceParams::default();
+            s.materials[0].shadow = ShadowParams { mode, softness: 0.1 };
+            for (renderer, out) in [("CPU", render_cpu(&s, &o)), ("GPU", render_gpu(g, &s, &o))] {
+                let a = out.aovs.as_ref().expect("AOVs");
+                let (mut facing, mut dark_facing, mut far_shadowed) = (0, 0, 0);
+                for (uv, &vis) in a.uv.iter().zip(&a.shadow) {
+                    let p = *uv - Vec2::splat(0.5);
+                    if !(uv.min_element() > 0.02 && uv.max_element() < 0.98) || p.length() < 0.02 {
+                        continue;
+                    }
+                    let toward_sun = p.x / p.length();
+                    if toward_sun > 0.3 {
+                        facing += 1;
+                        dark_facing += usize::from(vis < 0.999);
+                    } else if toward_sun < -0.9 && p.length() < 0.4 && vis < 0.5 {
+                        far_shadowed += 1;
+                    }
+                }
+                let what = format!("{renderer} {technique} {mode:?}");
+                println!("{what}: {facing} pixels face the sun, {dark_facing} of them shadowed; {far_shadowed} shadowed on the far side");
+                assert!(facing > 2000, "{what}: only {facing} pixels face the sun");
+                assert_eq!(dark_facing, 0, "{what}: {dark_facing} of {facing} sunward pixels are self-shadowed");
+                assert!(far_shadowed > 20, "{what}: the far side is not shadowed ({far_shadowed} pixels)");
+            }
+        }
+    }
+}

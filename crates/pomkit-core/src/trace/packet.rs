@@ -548,7 +548,8 @@ pub fn shadow_marches<S: Simd>(
     let mut slope = splat(simd, f32::NEG_INFINITY);
     let mut blocked = mask(simd, [false; LANES]);
     let mut active = mask(simd, live);
-    let mut fetches = [0u32; LANES];
+    // The receiver's lift, made by `shadow_start`.
+    let mut fetches = [1u32; LANES];
     for i in 1..most {
         let fi = i as f32;
         active &= nf.simd_gt(fi);
