@@ -536,6 +536,7 @@ fn lit(in: VertexOutput, s: Traced, p: pbr_types::PbrInput) -> Lit {
         let v = self_shadow(s, (*light).direction_to_light);
         out.fetches += u32(v.y);
         if i == 0u {
+            // The debug view shows the first directional light's self-shadow.
             out.visibility = v.x;
         }
         var map = 1.0;
@@ -566,6 +567,11 @@ fn lit(in: VertexOutput, s: Traced, p: pbr_types::PbrInput) -> Lit {
         let hit_world = pomkit_hit_position(p.world_position.xyz, s.to_eye, s.n, s.hit.depth, pomkit.params.depth_scale, s.uv_scale);
         let v = self_shadow(s, normalize((*light).position_radius.xyz - hit_world));
         out.fetches += u32(v.y);
+        if lights.n_directional_lights == 0u && i == ranges.first_point_light_index_offset {
+            // With no directional light, the debug view shows the cluster's first point or spot
+            // light's.
+            out.visibility = v.x;
+        }
         var map = 1.0;
         if receiver && ((*light).flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             if spot {

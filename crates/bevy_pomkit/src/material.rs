@@ -35,7 +35,8 @@ pub enum PomkitDebug {
     HitUv,
     /// (fetches / 64, LOD weight, height mip level / 16, 1).
     Fetches,
-    /// (visibility of the first directional light, LOD weight, 0, 1).
+    /// (self-shadow visibility of the first directional light, or with none of the first point
+    /// or spot light of the fragment's cluster, LOD weight, 0, 1).
     Shadow,
 }
 

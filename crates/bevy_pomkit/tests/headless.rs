@@ -15,10 +15,12 @@ use std::time::Duration;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::Hdr;
 use bevy::camera::RenderTarget;
-use bevy::core_pipeline::prepass::DepthPrepass;
+use bevy::core_pipeline::prepass::{DeferredPrepass, DepthPrepass};
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::math::Affine2;
+use bevy::pbr::DefaultOpaqueRendererMethod;
 use bevy::prelude::*;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy_pomkit::height::depth_image;
 use bevy_pomkit::{HeightMaps, MapKind, Pomkit, PomkitDebug, PomkitMaterial, ShadowMode, ShadowParams, Technique};
 use headless::{Frame, Headless};
@@ -304,6 +306,17 @@ fn a_bump_is_brighter_on_the_side_of_the_light_for_every_tangent_kind() {
 /// The POM quad over a constant-depth field (its traced floor 0.2 below the polygon) and a red
 /// plain square 0.1 below it: with pixel depth offset the square shows through.
 fn pdo_frame(pixel_depth: bool, prepass: bool) -> (Frame, Vec<Ray3d>) {
+    pdo_frame_with(pixel_depth, prepass, false)
+}
+
+/// Makes `camera` draw opaque materials with Bevy's deferred renderer: G-buffer prepass, then
+/// the lighting pass.
+fn make_deferred(app: &mut Headless, camera: Entity) {
+    app.world().entity_mut(camera).insert((DepthPrepass, DeferredPrepass));
+    app.world().insert_resource(DefaultOpaqueRendererMethod::deferred());
+}
+
+fn pdo_frame_with(pixel_depth: bool, prepass: bool, deferred: bool) -> (Frame, Vec<Ray3d>) {
     let mut s = Setup::new(HeightField::constant(16, 16, 1.0), Technique::Pom);
     s.debug = PomkitDebug::Off;
     s.prepass = prepass;
@@ -326,17 +339,22 @@ fn pdo_frame(pixel_depth: bool, prepass: bool) -> (Frame, Vec<Ray3d>) {
         Transform::from_xyz(0.0, -0.1, 0.0).with_scale(Vec3::splat(0.4)),
     ));
     let camera = spawn_camera(&mut app, s.camera, prepass);
+    if deferred {
+        make_deferred(&mut app, camera);
+    }
     let frame = app.frame(TIMEOUT).expect("frame");
     let rays = camera_rays(&mut app, camera);
     (frame, rays)
 }
 
 #[test]
-fn pixel_depth_offset_shows_in_the_main_pass_and_the_depth_prepass() {
+fn pixel_depth_offset_shows_in_the_main_pass_the_depth_prepass_and_the_g_buffer() {
     let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
-    for prepass in [false, true] {
+    // (prepass, deferred): forward, forward with a depth prepass, deferred (whose G-buffer
+    // prepass writes the depth).
+    for (prepass, deferred) in [(false, false), (true, false), (true, true)] {
         for pixel_depth in [false, true] {
-            let (frame, rays) = pdo_frame(pixel_depth, prepass);
+            let (frame, rays) = pdo_frame_with(pixel_depth, prepass, deferred);
             // Pixels whose ray meets the red square's plane well inside it.
             let mut red = 0;
             let mut n = 0;
@@ -350,15 +368,15 @@ fn pixel_depth_offset_shows_in_the_main_pass_and_the_depth_prepass() {
                     }
                 }
             }
-            eprintln!("prepass {prepass}, pixel depth {pixel_depth}: {red} of {n} red");
+            eprintln!("prepass {prepass}, deferred {deferred}, pixel depth {pixel_depth}: {red} of {n} red");
             assert!(n > 500);
             if pixel_depth {
                 assert!(
                     red as f32 > 0.99 * n as f32,
-                    "prepass {prepass}: the square should show through the traced floor"
+                    "prepass {prepass}, deferred {deferred}: the square should show through the traced floor"
                 );
             } else {
-                assert_eq!(red, 0, "prepass {prepass}: the polygon should hide the square");
+                assert_eq!(red, 0, "prepass {prepass}, deferred {deferred}: the polygon should hide the square");
             }
         }
     }
@@ -537,57 +555,226 @@ fn shadow_maps_see_the_traced_depth() {
     assert!(u < 0.05 * o, "without shadow_pixel_depth the polygon should shadow the floor ({u} against {o})");
 }
 
+/// A textured brick quad traced with `pom` under a sun (no self-shadows, which Bevy's deferred
+/// lighting pass cannot apply), drawn forward or deferred.
+fn bricks_frame(technique: Technique, deferred: bool) -> Frame {
+    let field = generate(Pattern::Bricks, 128, 128);
+    let mut s = Setup::new(field.clone(), technique);
+    s.debug = PomkitDebug::Off;
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    // An albedo that shows where the traced UV lands: red mortar, pale bricks.
+    let albedo: Vec<u8> = (0..field.width() * field.height())
+        .flat_map(|i| {
+            let d = field.depth_at(i64::from(i % field.width()), i64::from(i / field.width()), EdgeMode::Wrap);
+            if d > 0.5 { [160, 40, 30, 255] } else { [220, 200, 170, 255] }
+        })
+        .collect();
+    let albedo = Image::new(
+        Extent3d { width: field.width(), height: field.height(), depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        albedo,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::default(),
+    );
+    let albedo = app.world().resource_mut::<Assets<Image>>().add(albedo);
+    let base = StandardMaterial { base_color_texture: Some(albedo), perceptual_roughness: 0.6, ..default() };
+    let material = pomkit_material(&mut app, &s, base);
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+    TestLight::Sun.spawn(&mut app);
+    app.world().insert_resource(GlobalAmbientLight { brightness: 200.0, ..default() });
+    let camera = spawn_camera(&mut app, s.camera, false);
+    if deferred {
+        make_deferred(&mut app, camera);
+    }
+    app.frame(TIMEOUT).expect("frame")
+}
+
+/// The share of pixels of `a` and `b` whose channels differ by more than 5% (of the brighter
+/// channel of `a`, at least 0.05), and the brightest channel of `a`.
+fn share_off(a: &Frame, b: &Frame) -> (f32, f32) {
+    let (mut off, mut brightest) = (0, 0.0f32);
+    for (f, d) in a.pixels.iter().zip(&b.pixels) {
+        let diff = (0..3).map(|c| (f[c] - d[c]).abs()).fold(0.0f32, f32::max);
+        let level = f[0].max(f[1]).max(f[2]);
+        brightest = brightest.max(level);
+        off += usize::from(diff > 0.05 * level.max(0.05));
+    }
+    (off as f32 / a.pixels.len() as f32, brightest)
+}
+
+/// The traced UV shades Bevy's G-buffer: the deferred picture is the forward one, up to the
+/// G-buffer's packing (8-bit colour, packed normals), and the depth offset reaches the depth
+/// buffer (`pixel_depth_offset_shows_in_the_main_pass_the_depth_prepass_and_the_g_buffer`).
+/// The comparison can tell a traced picture from an untraced one: the same bricks with normal
+/// mapping only differ on many pixels.
+#[test]
+fn deferred_rendering_draws_the_forward_picture() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let forward = bricks_frame(Technique::Pom, false);
+    let (share, brightest) = share_off(&forward, &bricks_frame(Technique::Pom, true));
+    let (untraced, _) = share_off(&forward, &bricks_frame(Technique::Normal, true));
+    eprintln!(
+        "forward against deferred: {:.2}% of pixels off by over 5%; against deferred normal mapping {:.2}%",
+        share * 100.0,
+        untraced * 100.0
+    );
+    assert!(brightest > 0.1, "the forward picture is dark");
+    assert!(untraced > 0.1, "normal mapping looks like pom here ({:.2}% differ): the test is blind", untraced * 100.0);
+    assert!(share < 0.01, "{:.2}% of the deferred picture's pixels differ from the forward one", share * 100.0);
+}
+
+/// A light of the self-shadow tests: where it is, seen from the quad.
+#[derive(Clone, Copy, Debug)]
+enum TestLight {
+    /// A sun 30 degrees above the horizon, from +x and a little -z.
+    Sun,
+    /// A point light 1.5 above the quad, 3 toward +x: 20 to 37 degrees above the horizon over
+    /// the quad.
+    Point,
+    /// A spot light there, aimed at the quad's centre with a cone wide enough for all of it.
+    Spot,
+}
+
+const LIGHT_POSITION: Vec3 = Vec3::new(3.0, 1.5, -0.5);
+
+impl TestLight {
+    /// The world direction toward the light from the world point `p`.
+    fn toward(self, p: Vec3) -> Vec3 {
+        match self {
+            Self::Sun => Vec3::new(1.0, 0.62, -0.3).normalize(),
+            Self::Point | Self::Spot => (LIGHT_POSITION - p).normalize(),
+        }
+    }
+
+    fn spawn(self, app: &mut Headless) {
+        let world = app.world();
+        match self {
+            Self::Sun => world.spawn((
+                DirectionalLight { illuminance: 1000.0, shadow_maps_enabled: false, ..default() },
+                Transform::default().looking_to(-self.toward(Vec3::ZERO), Vec3::Y),
+            )),
+            Self::Point => world.spawn((
+                PointLight { intensity: 2.0e6, range: 20.0, radius: 0.0, shadow_maps_enabled: false, ..default() },
+                Transform::from_translation(LIGHT_POSITION),
+            )),
+            Self::Spot => world.spawn((
+                SpotLight {
+                    intensity: 2.0e6,
+                    range: 20.0,
+                    radius: 0.0,
+                    outer_angle: 0.9,
+                    inner_angle: 0.8,
+                    shadow_maps_enabled: false,
+                    ..default()
+                },
+                Transform::from_translation(LIGHT_POSITION).looking_at(Vec3::ZERO, Vec3::Y),
+            )),
+        };
+    }
+}
+
+/// The exact-traced pyramids quad lit by `light` alone (no ambient light), drawn with
+/// self-shadows `mode` and the debug output `debug`; with the camera rays.
+fn shadow_frame(light: TestLight, mode: ShadowMode, debug: PomkitDebug) -> (Frame, Vec<Ray3d>) {
+    let mut s = Setup::new(generate(Pattern::Pyramids, 64, 64), Technique::Exact);
+    s.debug = debug;
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let material = pomkit_material(&mut app, &s, StandardMaterial { perceptual_roughness: 1.0, ..default() });
+    if let Some(mut m) = app.world().resource_mut::<Assets<PomkitMaterial>>().get_mut(&material) {
+        m.extension.shadow.mode = mode;
+    }
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+    light.spawn(&mut app);
+    app.world().insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    let camera = spawn_camera(&mut app, s.camera, false);
+    let frame = app.frame(TIMEOUT).expect("frame");
+    let rays = camera_rays(&mut app, camera);
+    (frame, rays)
+}
+
+/// pomkit-core's exact hit for the camera ray `ray` and its self-shadow toward `light` (the
+/// light's direction taken at the hit's world point, in ray terms: u along +x, v along +z, up).
+fn cpu_visibility(surface: &Surface, ray: Ray3d, light: TestLight, mode: ShadowMode) -> f32 {
+    let d = ray.direction.as_vec3();
+    let uv0 = quad_uv(hit_plane(ray, 0.0).expect("inside"));
+    let traced =
+        Ray::new(pomkit_core::glam::Vec2::new(uv0.x, uv0.y), pomkit_core::glam::Vec3::new(d.x, d.z, d.y).normalize());
+    let params = TraceParams::default();
+    let hit = trace(surface, &traced, Technique::Exact, &params);
+    // The hit's world point: 2 world units per UV unit, `depth * depth_scale` UV units down.
+    let world = Vec3::new(2.0 * hit.uv.x - 1.0, -2.0 * hit.depth * surface.depth_scale(), 2.0 * hit.uv.y - 1.0);
+    let l = light.toward(world);
+    let l = pomkit_core::glam::Vec3::new(l.x, l.z, l.y);
+    pomkit_core::shadow(surface, hit.uv, hit.depth, l, &ShadowParams { mode, softness: 0.1 }, &params).visibility
+}
+
 #[test]
 fn self_shadows_agree_with_pomkit_core() {
     let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
-    let field = generate(Pattern::Pyramids, 64, 64);
-    let surface = Surface::new(field.clone(), EdgeMode::Wrap, 0.1);
-    // The sun 30 degrees above the horizon, from +x and a little -z.
-    let to_light = Vec3::new(1.0, 0.62, -0.3).normalize();
-    for mode in [ShadowMode::Hard, ShadowMode::Exact] {
-        let mut s = Setup::new(field.clone(), Technique::Exact);
-        s.debug = PomkitDebug::Shadow;
-        let mut app = Headless::new(W, H);
-        let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
-        let material = pomkit_material(&mut app, &s, StandardMaterial::default());
-        if let Some(mut m) = app.world().resource_mut::<Assets<PomkitMaterial>>().get_mut(&material) {
-            m.extension.shadow.mode = mode;
+    let surface = Surface::new(generate(Pattern::Pyramids, 64, 64), EdgeMode::Wrap, 0.1);
+    for light in [TestLight::Sun, TestLight::Point, TestLight::Spot] {
+        for mode in [ShadowMode::Hard, ShadowMode::Exact] {
+            let (frame, rays) = shadow_frame(light, mode, PomkitDebug::Shadow);
+            let (mut n, mut differ, mut shadowed) = (0, 0, 0);
+            for (k, _) in inside(&rays, 0.02) {
+                let want = cpu_visibility(&surface, rays[k], light, mode);
+                let got = frame.pixels[k][0];
+                n += 1;
+                shadowed += usize::from(want < 0.5);
+                differ += usize::from((got - want).abs() > 0.5);
+            }
+            let share = differ as f32 / n as f32;
+            let what = format!("{light:?} {}", mode.name());
+            eprintln!("{what}: {n} pixels, {shadowed} shadowed by pomkit-core, {:.2}% disagree", share * 100.0);
+            assert!(shadowed > n / 10, "{what}: the test light casts too little shadow ({shadowed} of {n})");
+            // Only where a shadow edge passes within a hair of the hit (f32 against f64,
+            // half-float hit UVs) may the two differ.
+            assert!(share < 0.03, "{what}: {:.2}% of pixels disagree with pomkit-core", share * 100.0);
         }
-        app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
-        app.world().spawn((
-            DirectionalLight { illuminance: 1000.0, shadow_maps_enabled: false, ..default() },
-            Transform::default().looking_to(-to_light, Vec3::Y),
-        ));
-        let camera = spawn_camera(&mut app, s.camera, false);
-        let frame = app.frame(TIMEOUT).expect("frame");
-        let rays = camera_rays(&mut app, camera);
-        // pomkit-core for the same rays: the exact hit, then its shadow toward the same light
-        // in ray terms (u along +x, v along +z, up).
-        let light = pomkit_core::glam::Vec3::new(to_light.x, to_light.z, to_light.y);
-        let params = TraceParams::default();
-        let (mut n, mut differ, mut shadowed) = (0, 0, 0);
+    }
+}
+
+/// A self-shadowed pixel loses the whole of that light's direct light, as Bevy's own lighting
+/// computes it (its attenuation with distance, a spot light's cone): lit by one light and no
+/// ambient light, the pixels pomkit-core finds self-shadowed are black, and those it finds lit
+/// are not.
+#[test]
+fn a_self_shadow_takes_out_the_lights_own_contribution() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let surface = Surface::new(generate(Pattern::Pyramids, 64, 64), EdgeMode::Wrap, 0.1);
+    for light in [TestLight::Sun, TestLight::Point, TestLight::Spot] {
+        let (frame, rays) = shadow_frame(light, ShadowMode::Hard, PomkitDebug::Off);
+        let (mut dark, mut lit) = (Vec::new(), Vec::new());
         for (k, _) in inside(&rays, 0.02) {
-            let d = rays[k].direction.as_vec3();
-            let uv0 = quad_uv(hit_plane(rays[k], 0.0).expect("inside"));
-            let ray = Ray::new(
-                pomkit_core::glam::Vec2::new(uv0.x, uv0.y),
-                pomkit_core::glam::Vec3::new(d.x, d.z, d.y).normalize(),
-            );
-            let hit = trace(&surface, &ray, Technique::Exact, &params);
-            let want =
-                pomkit_core::shadow(&surface, hit.uv, hit.depth, light, &ShadowParams { mode, softness: 0.1 }, &params)
-                    .visibility;
-            let got = frame.pixels[k][0];
-            n += 1;
-            shadowed += usize::from(want < 0.5);
-            differ += usize::from((got - want).abs() > 0.5);
+            let c = frame.pixels[k];
+            let lum = c[0] + c[1] + c[2];
+            match cpu_visibility(&surface, rays[k], light, ShadowMode::Hard) {
+                0.0 => dark.push(lum),
+                1.0 => lit.push(lum),
+                _ => {}
+            }
         }
-        let share = differ as f32 / n as f32;
-        eprintln!("{}: {n} pixels, {shadowed} shadowed by pomkit-core, {:.2}% disagree", mode.name(), share * 100.0);
-        assert!(shadowed > n / 10, "{}: the test light casts too little shadow ({shadowed} of {n})", mode.name());
-        // Only where a shadow edge passes within a hair of the hit (f32 against f64, half-float
-        // hit UVs) may the two differ.
-        assert!(share < 0.03, "{}: {:.2}% of pixels disagree with pomkit-core", mode.name(), share * 100.0);
+        dark.sort_by(f32::total_cmp);
+        lit.sort_by(f32::total_cmp);
+        let (dark_median, lit_median) = (dark[dark.len() / 2], lit[lit.len() / 2]);
+        eprintln!(
+            "{light:?}: shadowed median {dark_median:.4} ({} px), lit median {lit_median:.4} ({} px)",
+            dark.len(),
+            lit.len()
+        );
+        assert!(
+            dark.len() > 300 && lit.len() > 300,
+            "{light:?}: too few pixels ({} dark, {} lit)",
+            dark.len(),
+            lit.len()
+        );
+        assert!(lit_median > 0.05, "{light:?}: the light does not reach the quad ({lit_median})");
+        assert!(
+            dark_median < 0.02 * lit_median,
+            "{light:?}: shadowed pixels keep light: {dark_median} against {lit_median}"
+        );
     }
 }
 

@@ -451,7 +451,13 @@ fn a_low_sun_leaves_every_face_that_looks_at_it_lit() {
     let elevation = 15f32.to_radians();
     // The quad lies in the XY plane with u along +X: a sun toward +X is a sun toward +u.
     let sun = Vec3::new(elevation.cos(), 0.0, elevation.sin());
-    let cam = Camera { eye: Vec3::new(0.0, -1.3, 1.6), target: Vec3::ZERO, up: Vec3::Z, fov_y_deg: 45.0, ..Camera::default() };
+    let cam = Camera {
+        eye: Vec3::new(0.0, -1.3, 1.6),
+        target: Vec3::ZERO,
+        up: Vec3::Z,
+        fov_y_deg: 45.0,
+        ..Camera::default()
+    };
     let o = RenderOptions { width: 160, height: 160, aovs: true, ..Default::default() };
     for technique in [Technique::Pom, Technique::Steep, Technique::Relief, Technique::Parallax, Technique::Exact] {
         for mode in [ShadowMode::Hard, ShadowMode::Soft, ShadowMode::Exact] {
@@ -475,7 +481,9 @@ fn a_low_sun_leaves_every_face_that_looks_at_it_lit() {
                     }
                 }
                 let what = format!("{renderer} {technique} {mode:?}");
-                println!("{what}: {facing} pixels face the sun, {dark_facing} of them shadowed; {far_shadowed} shadowed on the far side");
+                println!(
+                    "{what}: {facing} pixels face the sun, {dark_facing} of them shadowed; {far_shadowed} shadowed on the far side"
+                );
                 assert!(facing > 2000, "{what}: only {facing} pixels face the sun");
                 assert_eq!(dark_facing, 0, "{what}: {dark_facing} of {facing} sunward pixels are self-shadowed");
                 assert!(far_shadowed > 20, "{what}: the far side is not shadowed ({far_shadowed} pixels)");
