@@ -67,8 +67,9 @@ struct Args {
     /// Trace in the directional light's shadow cascades too (`shadow_pixel_depth`).
     #[arg(long)]
     shadow_pixel_depth: bool,
-    /// Methods to time (default all four): pom, exact, bevy-occlusion, bevy-relief, or any
-    /// pomkit technique.
+    /// Methods to time (default all four): pom, exact, bevy-occlusion, bevy-relief,
+    /// bevy-plain, or any pomkit technique. A pomkit method may carry its own settings,
+    /// METHOD:SHADOW:PDO (PDO camera, off or shadow-maps), e.g. pom:none:off,pom:soft:camera.
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
     /// Time the one method given and print its row only (each method is timed in a process of
@@ -110,10 +111,10 @@ fn main() {
             std::process::exit(2);
         }
     };
-    let timed: Vec<Method> = if args.methods.is_empty() {
-        methods().to_vec()
-    } else {
-        match args.methods.iter().map(|m| Method::parse(m)).collect() {
+    let specs: Vec<String> =
+        if args.methods.is_empty() { methods().iter().map(|m| m.name()).collect() } else { args.methods.clone() };
+    let timed: Vec<Method> = {
+        match specs.iter().map(|m| Method::parse(m.split(':').next().unwrap_or(m))).collect() {
             Ok(m) => m,
             Err(e) => {
                 eprintln!("error: --methods: {e}");
@@ -148,15 +149,28 @@ fn main() {
     if !args.no_timing {
         println!("| method | frame time, median of {} (ms) | pomkit self-shadows | pixel depth offset |", args.frames);
         println!("|---|--:|---|---|");
-        for method in timed {
+        for (method, spec) in timed.iter().zip(&specs) {
             // A process per method, this program again with --child.
             let mut child = std::process::Command::new(std::env::current_exe().expect("the running program"));
             child.args(["--child", "--no-accuracy", "--methods", &method.name(), "--frames", &args.frames.to_string()]);
-            child.args(["--pattern", &args.pattern, "--shadow", &args.shadow]);
-            if args.no_pixel_depth {
+            // The method's own settings (METHOD:SHADOW:PDO), else the command line's.
+            let mut parts = spec.split(':').skip(1);
+            let shadow = parts.next().unwrap_or(&args.shadow);
+            let (no_pdo, shadow_pdo) = match parts.next() {
+                None => (args.no_pixel_depth, args.shadow_pixel_depth),
+                Some("off") => (true, false),
+                Some("camera") => (false, false),
+                Some("shadow-maps") => (false, true),
+                Some(other) => {
+                    eprintln!("error: --methods: {spec}: depth offset '{other}': expected camera, off or shadow-maps");
+                    std::process::exit(2);
+                }
+            };
+            child.args(["--pattern", &args.pattern, "--shadow", shadow]);
+            if no_pdo {
                 child.arg("--no-pixel-depth");
             }
-            if args.shadow_pixel_depth {
+            if shadow_pdo {
                 child.arg("--shadow-pixel-depth");
             }
             match child.stderr(std::process::Stdio::null()).output() {

@@ -272,8 +272,15 @@ fn standard_input(in: VertexOutput, is_front: bool, s: Traced) -> pbr_types::Pbr
     let flags = m.flags;
     let double_sided = (flags & pbr_types::STANDARD_MATERIAL_FLAGS_DOUBLE_SIDED_BIT) != 0u;
     let uv = s.hit.uv;
+#ifdef POMKIT_HIT_UV_DERIVATIVES
+    // For comparison only (`Pomkit::entry_gradients` off): the hit UV's own derivatives, as
+    // Bevy's parallax mapping samples.
+    let ddx = dpdx(uv);
+    let ddy = dpdy(uv);
+#else
     let ddx = s.duv_dx;
     let ddy = s.duv_dy;
+#endif
 #ifdef POMKIT_BEVY_INPUT
     var vin = in;
 #ifdef VERTEX_UVS_A

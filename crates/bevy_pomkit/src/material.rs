@@ -69,7 +69,7 @@ pub struct Pomkit {
     pub channel: Channel,
     /// The tracing technique (default `pom`).
     pub technique: Technique,
-    /// Self-shadowing from directional lights (default none).
+    /// Self-shadowing from directional, point and spot lights (default none).
     pub shadow: ShadowParams,
     /// How far below the surface, in UV units (tile widths), the deepest point lies: greater
     /// than 0 and at most 16. Default 0.1.
@@ -86,7 +86,8 @@ pub struct Pomkit {
     /// Write the depth of the traced point in the main pass and the depth prepass (and the
     /// shadow maps of point and spot lights, which Bevy 0.19's pipeline keys do not tell apart
     /// from the depth prepass), so the surface meets other geometry where displaced geometry
-    /// would. Turns off early depth testing for these meshes. Default on.
+    /// would. Where the device allows it the written depth is declared conservative (never
+    /// nearer than the polygon's), which keeps early depth testing. Default on.
     pub pixel_depth_offset: bool,
     /// Also trace in directional lights' shadow maps, so their cascades hold the traced depth
     /// (needs `pixel_depth_offset`). Default off: every cascade texel the mesh covers then runs
@@ -96,6 +97,12 @@ pub struct Pomkit {
     /// Shade with the height map's normals (default on). Off keeps the standard material's
     /// own normal map, or the vertex normal.
     pub normals: bool,
+    /// Sample the standard material's textures at the hit with the screen gradients of the
+    /// entry UV, the pixel's footprint (default on). Off samples them with the hit UV's own
+    /// derivatives, as Bevy's parallax mapping does: those jump where neighbouring pixels hit
+    /// different features and pick a far too coarse mip, in thin streaks at the feet of steep
+    /// features. Kept for comparison.
+    pub entry_gradients: bool,
     /// Debug output instead of the shaded colour.
     pub debug: PomkitDebug,
     /// Depth (R) and parallax value (G), all mips; built by the plugin.
@@ -134,6 +141,7 @@ impl Pomkit {
             pixel_depth_offset: true,
             shadow_pixel_depth: false,
             normals: true,
+            entry_gradients: true,
             debug: PomkitDebug::Off,
             heights: None,
             pyramid: None,
@@ -274,6 +282,8 @@ pub struct PomkitKey {
     /// The world has point or spot lights (the plugin keeps this up to date): self-shadows from
     /// them are in the shader only then.
     pub point_lights: bool,
+    /// [`Pomkit::entry_gradients`].
+    pub entry_gradients: bool,
 }
 
 impl From<&Pomkit> for PomkitKey {
@@ -291,6 +301,7 @@ impl From<&Pomkit> for PomkitKey {
             debug: m.debug.index() as u8,
             textures: m.base_textures,
             point_lights: m.point_lights,
+            entry_gradients: m.entry_gradients,
         }
     }
 }
@@ -322,6 +333,7 @@ impl PomkitKey {
         flag(self.normals, "POMKIT_NORMALS");
         flag(self.lod_fade, "POMKIT_LOD_FADE");
         flag(self.point_lights && self.shadow != 0, "POMKIT_POINT_LIGHTS");
+        flag(!self.entry_gradients, "POMKIT_HIT_UV_DERIVATIVES");
         flag(pixel_depth, "POMKIT_PIXEL_DEPTH");
         flag(pixel_depth && CONSERVATIVE_DEPTH.load(Ordering::Relaxed), "POMKIT_CONSERVATIVE_DEPTH");
         flag(pixel_depth || has("UNCLIPPED_DEPTH_ORTHO_EMULATION"), "POMKIT_FRAG_DEPTH");

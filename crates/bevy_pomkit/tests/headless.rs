@@ -303,12 +303,6 @@ fn a_bump_is_brighter_on_the_side_of_the_light_for_every_tangent_kind() {
     }
 }
 
-/// The POM quad over a constant-depth field (its traced floor 0.2 below the polygon) and a red
-/// plain square 0.1 below it: with pixel depth offset the square shows through.
-fn pdo_frame(pixel_depth: bool, prepass: bool) -> (Frame, Vec<Ray3d>) {
-    pdo_frame_with(pixel_depth, prepass, false)
-}
-
 /// Makes `camera` draw opaque materials with Bevy's deferred renderer: G-buffer prepass, then
 /// the lighting pass.
 fn make_deferred(app: &mut Headless, camera: Entity) {
@@ -316,7 +310,9 @@ fn make_deferred(app: &mut Headless, camera: Entity) {
     app.world().insert_resource(DefaultOpaqueRendererMethod::deferred());
 }
 
-fn pdo_frame_with(pixel_depth: bool, prepass: bool, deferred: bool) -> (Frame, Vec<Ray3d>) {
+/// The POM quad over a constant-depth field (its traced floor 0.2 below the polygon) and a red
+/// plain square 0.1 below it: with pixel depth offset the square shows through.
+fn pdo_frame(pixel_depth: bool, prepass: bool, deferred: bool) -> (Frame, Vec<Ray3d>) {
     let mut s = Setup::new(HeightField::constant(16, 16, 1.0), Technique::Pom);
     s.debug = PomkitDebug::Off;
     s.prepass = prepass;
@@ -354,7 +350,7 @@ fn pixel_depth_offset_shows_in_the_main_pass_the_depth_prepass_and_the_g_buffer(
     // prepass writes the depth).
     for (prepass, deferred) in [(false, false), (true, false), (true, true)] {
         for pixel_depth in [false, true] {
-            let (frame, rays) = pdo_frame_with(pixel_depth, prepass, deferred);
+            let (frame, rays) = pdo_frame(pixel_depth, prepass, deferred);
             // Pixels whose ray meets the red square's plane well inside it.
             let mut red = 0;
             let mut n = 0;
@@ -823,4 +819,112 @@ fn the_lod_fade_follows_the_height_map_mip_level() {
     assert!(full > 100 && none > 100, "the view does not span the fade ({full} full, {none} out)");
     // The GPU takes one derivative per 2x2 quad, the test one pixel's differences.
     assert!(median < 0.02 && p95 < 0.25, "LOD weight off: median {median}, p95 {p95}");
+}
+
+/// An albedo that shows which mip level was read: levels 0 to 3 white, coarser levels black
+/// (the mip chain of a `size`-texel texture). A pixel reads level 3 or finer unless its texture
+/// gradients claim a footprint of over 8 texels; on the tests' quad at 160 x 120 the real
+/// footprint is under 3 texels of a 128-texel map everywhere, so black marks a mip level picked
+/// far too coarse.
+fn mip_marker(size: u32) -> Image {
+    let (mut side, mut level, mut data) = (size, 0, Vec::new());
+    while side >= 1 {
+        let v = if level < 4 { 240 } else { 10 };
+        data.extend(std::iter::repeat_n([v, v, v, 255], (side * side) as usize).flatten());
+        level += 1;
+        side /= 2;
+    }
+    let mut image = Image::new(
+        Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        data[..(size * size * 4) as usize].to_vec(),
+        TextureFormat::Rgba8Unorm,
+        RenderAssetUsages::default(),
+    );
+    // Every level after the first, in order (Bevy uploads the levels of a layer one after
+    // another).
+    image.data = Some(data);
+    image.texture_descriptor.mip_level_count = level;
+    image.sampler = bevy::image::ImageSampler::linear();
+    image
+}
+
+/// The steep brick relief with the mip-marking albedo, unlit (the albedo at the hit as it is),
+/// traced with `pom`, drawn at `scale` times the tests' resolution. `hit_derivatives` turns
+/// `entry_gradients` off: the hit UV's own derivatives pick the mip level, as in Bevy's own
+/// parallax mapping (and in the plugin before it sampled with the entry UV's gradients).
+fn streak_frame(scale: u32, hit_derivatives: bool) -> (Frame, Option<Vec<Ray3d>>) {
+    let mut s = Setup::new(generate(Pattern::Bricks, 128, 128), Technique::Pom);
+    s.debug = PomkitDebug::Off;
+    s.camera = Transform::from_xyz(0.0, 1.0, 1.7).looking_at(Vec3::new(0.0, -0.1, -0.1), Vec3::Y);
+    let mut app = Headless::new(W * scale, H * scale);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let albedo = app.world().resource_mut::<Assets<Image>>().add(mip_marker(128));
+    let base = StandardMaterial { base_color_texture: Some(albedo), unlit: true, ..default() };
+    let material = pomkit_material(&mut app, &s, base);
+    if let Some(mut m) = app.world().resource_mut::<Assets<PomkitMaterial>>().get_mut(&material) {
+        m.extension.entry_gradients = !hit_derivatives;
+    }
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+    let camera = spawn_camera(&mut app, s.camera, false);
+    let frame = app.frame(TIMEOUT).expect("frame");
+    let rays = (scale == 1).then(|| camera_rays(&mut app, camera));
+    (frame, rays)
+}
+
+/// Pixels of `frame` among `pixels` whose colour differs by more than 0.15 (linear, any
+/// channel) from the `scale` x `scale` box average of the supersampled `reference`.
+fn off_reference(frame: &Frame, reference: &Frame, scale: u32, pixels: &[(usize, Vec2)]) -> usize {
+    let mut off = 0;
+    for &(k, _) in pixels {
+        let (x, y) = (k as u32 % frame.width, k as u32 / frame.width);
+        {
+            let mut mean = [0.0f32; 3];
+            for sy in 0..scale {
+                for sx in 0..scale {
+                    let p = reference.at(x * scale + sx, y * scale + sy);
+                    for k in 0..3 {
+                        mean[k] += p[k] / (scale * scale) as f32;
+                    }
+                }
+            }
+            let p = frame.at(x, y);
+            off += usize::from((0..3).any(|k| (p[k] - mean[k]).abs() > 0.15));
+        }
+    }
+    off
+}
+
+/// The standard material's textures are sampled at the hit with the entry UV's gradients: the
+/// thin dark streaks at the feet of steep features, where the hit UV jumps between neighbouring
+/// pixels and its own derivatives pick a far too coarse mip, are gone. Each picture is set
+/// against a 4x4 supersampled render of itself (the edges of the relief differ in both); the
+/// pixels over the threshold are counted with the entry UV's gradients and with the hit UV's
+/// derivatives (Bevy's own sampling, `entry_gradients` off). `POMKIT_PICTURES=DIR` writes the
+/// pictures (three times the size).
+#[test]
+fn textures_at_the_hit_have_no_streaks_at_the_feet_of_steep_features() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let mut counts = Vec::new();
+    for hit_derivatives in [true, false] {
+        let (frame, rays) = streak_frame(1, hit_derivatives);
+        let (reference, _) = streak_frame(4, hit_derivatives);
+        // The quad's inside: its outline against the background is aliased in any picture.
+        let pixels = inside(&rays.expect("the camera's rays"), 0.02);
+        let off = off_reference(&frame, &reference, 4, &pixels);
+        let name = if hit_derivatives { "hit-uv-derivatives" } else { "entry-uv-gradients" };
+        eprintln!("{name}: {off} of {} pixels off the supersampled picture", pixels.len());
+        if let Some(dir) = std::env::var_os("POMKIT_PICTURES") {
+            let path = std::path::Path::new(&dir).join(format!("bevy-streaks-{name}.png"));
+            // Three times the size, each pixel a 3 x 3 block, so that one-pixel streaks show.
+            let picture = image::RgbaImage::from_raw(W, H, frame.to_srgb8()).expect("a whole frame");
+            image::imageops::resize(&picture, 3 * W, 3 * H, image::imageops::FilterType::Nearest)
+                .save(&path)
+                .expect("write the picture");
+        }
+        counts.push(off);
+    }
+    let (before, after) = (counts[0], counts[1]);
+    assert!(before > 100, "the hit UV's derivatives draw no streaks here ({before} pixels): the test is blind");
+    assert!(after * 10 < before, "{after} pixels off with the entry UV's gradients, {before} with the hit UV's");
 }
