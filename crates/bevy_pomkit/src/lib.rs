@@ -30,12 +30,15 @@
 //! What the extension adds to the standard material (docs/EMBEDDING.md has the whole story):
 //! - any pomkit technique (`pom`, `relief`, `exact`, ...), in the material's UV space after its
 //!   `uv_transform`;
-//! - self-shadowing from Bevy's directional lights (hard, soft, exact or depth), applied to each
-//!   light's direct contribution only;
+//! - self-shadowing from Bevy's directional, point and spot lights (hard, soft, exact or depth),
+//!   applied to each light's direct contribution only (forward rendering; Bevy's deferred
+//!   lighting pass shades without them);
 //! - the LOD fade: the full technique up to a mip level of the height map, faded out over the
 //!   next;
-//! - pixel depth offset, in the main pass and the depth prepass, and on request in directional
-//!   lights' shadow cascades;
+//! - the standard material's textures sampled at the hit with the entry UV's gradients;
+//! - every option a pipeline specialisation (shader defs), so what is off costs nothing;
+//! - pixel depth offset, in the main pass, the depth prepass and the deferred G-buffer, and on
+//!   request in directional lights' shadow cascades;
 //! - height maps from any Bevy `Image` of a readable format, rebuilt when the image changes;
 //! - a debug output of the hit UV, the fetch count, the LOD weight or the self-shadow.
 //!
@@ -70,7 +73,7 @@ pub type PomkitMaterial = ExtendedMaterial<StandardMaterial, Pomkit>;
 /// `#import pomkit::library::{pomkit_trace, PomkitParams}` once [`PomkitPlugin`] is added.
 pub const LIBRARY_SHADER: Handle<Shader> = uuid_handle!("6f2a4c55-3b0e-4a3e-9d0c-5b7e2f1c9a10");
 
-/// The material extension's shader (forward pass, prepass and shadow passes).
+/// The material extension's shader (forward pass, prepass, deferred G-buffer and shadow passes).
 pub const MATERIAL_SHADER: Handle<Shader> = uuid_handle!("0b8e41d2-7c4f-4f5b-a1c6-2e9d3f6a8b21");
 
 /// The import path of [`LIBRARY_SHADER`].
