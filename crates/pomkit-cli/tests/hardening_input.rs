@@ -1,4 +1,4 @@
-//! Bad or extreme input (issue 11, items 8a, 9, 10, 11, 12 and 14): a scale that overflows,
+//! Bad or extreme input: a scale that overflows,
 //! geometry f32 cannot draw, a glTF accessor past its buffer, unusable normal maps, flags a
 //! built-in height cannot honour, Mesa's runtime-directory noise, causes printed twice, NUL
 //! bytes in paths, and library jargon where the problem should be named; plus the inputs that

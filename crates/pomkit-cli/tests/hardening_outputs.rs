@@ -1,4 +1,4 @@
-//! Outputs, end to end (issue 11, items 3 (rays), 4, 5, 6 and 7): no output overwrites an input
+//! Outputs, end to end: no output overwrites an input
 //! or another output, through any path or link; a failed run leaves no file; write errors
 //! (a full device, a full standard output) fail the run; read-only outputs are refused, symbolic
 //! links written through; rays are streamed, and binary or endless rays fail within a line.

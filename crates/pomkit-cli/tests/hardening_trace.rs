@@ -1,4 +1,4 @@
-//! Hardening of tracing (issue 11, items 1 and 8): huge UVs with wrapping edges finish and give
+//! Hardening of tracing: huge UVs with wrapping edges finish and give
 //! the hit of the same ray in the first tile; directions of any length are the same ray; the
 //! depth scale and the perspective bias are bounded on every verb and in scene files; the CPU
 //! renderer draws meshes whose UVs are about 1e15.
