@@ -78,6 +78,32 @@ struct Args {
     child: bool,
 }
 
+/// A method to time with its settings: `METHOD[:SHADOW[:PDO]]`, the command line's where left
+/// out.
+struct Timed {
+    method: Method,
+    shadow: String,
+    no_pixel_depth: bool,
+    shadow_pixel_depth: bool,
+}
+
+impl Timed {
+    fn parse(spec: &str, args: &Args) -> Result<Self, String> {
+        let mut parts = spec.split(':');
+        let method = Method::parse(parts.next().unwrap_or(spec))?;
+        let shadow = parts.next().unwrap_or(&args.shadow).to_owned();
+        shadow.parse::<ShadowMode>().map_err(|e| format!("{spec}: {e}"))?;
+        let (no_pixel_depth, shadow_pixel_depth) = match parts.next() {
+            None => (args.no_pixel_depth, args.shadow_pixel_depth),
+            Some("off") => (true, false),
+            Some("camera") => (false, false),
+            Some("shadow-maps") => (false, true),
+            Some(other) => return Err(format!("{spec}: depth offset '{other}': expected camera, off or shadow-maps")),
+        };
+        Ok(Self { method, shadow, no_pixel_depth, shadow_pixel_depth })
+    }
+}
+
 const MAP: u32 = 256;
 const DEPTH_SCALE: f32 = 0.08;
 /// Bevy's layer count for both of its methods, as pom's most samples.
@@ -113,17 +139,15 @@ fn main() {
     };
     let specs: Vec<String> =
         if args.methods.is_empty() { methods().iter().map(|m| m.name()).collect() } else { args.methods.clone() };
-    let timed: Vec<Method> = {
-        match specs.iter().map(|m| Method::parse(m.split(':').next().unwrap_or(m))).collect() {
-            Ok(m) => m,
-            Err(e) => {
-                eprintln!("error: --methods: {e}");
-                std::process::exit(2);
-            }
+    let timed: Vec<Timed> = match specs.iter().map(|spec| Timed::parse(spec, &args)).collect() {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("error: --methods: {e}");
+            std::process::exit(2);
         }
     };
     if args.child {
-        for method in timed {
+        for Timed { method, .. } in timed {
             let opts = SceneOptions {
                 method,
                 pattern,
@@ -149,34 +173,28 @@ fn main() {
     if !args.no_timing {
         println!("| method | frame time, median of {} (ms) | pomkit self-shadows | pixel depth offset |", args.frames);
         println!("|---|--:|---|---|");
-        for (method, spec) in timed.iter().zip(&specs) {
+        for t in &timed {
             // A process per method, this program again with --child.
             let mut child = std::process::Command::new(std::env::current_exe().expect("the running program"));
-            child.args(["--child", "--no-accuracy", "--methods", &method.name(), "--frames", &args.frames.to_string()]);
-            // The method's own settings (METHOD:SHADOW:PDO), else the command line's.
-            let mut parts = spec.split(':').skip(1);
-            let shadow = parts.next().unwrap_or(&args.shadow);
-            let (no_pdo, shadow_pdo) = match parts.next() {
-                None => (args.no_pixel_depth, args.shadow_pixel_depth),
-                Some("off") => (true, false),
-                Some("camera") => (false, false),
-                Some("shadow-maps") => (false, true),
-                Some(other) => {
-                    eprintln!("error: --methods: {spec}: depth offset '{other}': expected camera, off or shadow-maps");
-                    std::process::exit(2);
-                }
-            };
-            child.args(["--pattern", &args.pattern, "--shadow", shadow]);
-            if no_pdo {
+            child.args([
+                "--child",
+                "--no-accuracy",
+                "--methods",
+                &t.method.name(),
+                "--frames",
+                &args.frames.to_string(),
+            ]);
+            child.args(["--pattern", &args.pattern, "--shadow", &t.shadow]);
+            if t.no_pixel_depth {
                 child.arg("--no-pixel-depth");
             }
-            if shadow_pdo {
+            if t.shadow_pixel_depth {
                 child.arg("--shadow-pixel-depth");
             }
             match child.stderr(std::process::Stdio::null()).output() {
                 Ok(out) if out.status.success() => print!("{}", String::from_utf8_lossy(&out.stdout)),
-                Ok(out) => println!("| {} | failed ({}) | | |", method.name(), out.status),
-                Err(e) => println!("| {} | failed ({e}) | | |", method.name()),
+                Ok(out) => println!("| {} | failed ({}) | | |", t.method.name(), out.status),
+                Err(e) => println!("| {} | failed ({e}) | | |", t.method.name()),
             }
         }
         println!();
