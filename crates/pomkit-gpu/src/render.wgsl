@@ -55,7 +55,8 @@ struct Material {
 
 struct Object {
     model: mat4x4<f32>,
-    // Cofactor matrix of the model's linear part (normals), sign-corrected for mirrors.
+    // Cofactor matrix of the model's linear part (normals), sign-corrected for mirrors; its
+    // last element is the sign of the determinant (-1 for a mirror).
     normal_matrix: mat4x4<f32>,
 }
 
@@ -166,7 +167,9 @@ fn vertex(v: VertexIn) -> VertexOut {
     let nm3 = mat3x3<f32>(object.normal_matrix[0].xyz, object.normal_matrix[1].xyz, object.normal_matrix[2].xyz);
     let normal = pomkit_safe_normalize(nm3 * v.normal, v.normal);
     let t_world = m3 * v.tangent.xyz;
-    let f = pomkit_tangent_frame(normal, vec4<f32>(t_world, v.tangent.w));
+    // A mirror maps the bitangent to minus the cross product of the mapped normal and tangent:
+    // the handedness flips with the determinant's sign.
+    let f = pomkit_tangent_frame(normal, vec4<f32>(t_world, v.tangent.w * object.normal_matrix[3][3]));
     out.clip = frame.view_proj * vec4<f32>(world, 1.0);
     out.world = world;
     out.normal = f.n;

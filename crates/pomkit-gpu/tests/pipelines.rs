@@ -114,6 +114,17 @@ enum Vertices<'a> {
 }
 
 fn draw(g: &mut Gpu, material: &GpuMaterial, vertices: &Vertices<'_>, options: &PipelineOptions) -> Frame {
+    draw_model(g, material, vertices, options, Mat4::IDENTITY)
+}
+
+/// [`draw`] with the object's model matrix `model`; the pipeline takes the object's front face.
+fn draw_model(
+    g: &mut Gpu,
+    material: &GpuMaterial,
+    vertices: &Vertices<'_>,
+    options: &PipelineOptions,
+    model: Mat4,
+) -> Frame {
     let Gpu { ctx, pipelines } = g;
     let device = &ctx.device;
     let cam = camera();
@@ -132,7 +143,8 @@ fn draw(g: &mut Gpu, material: &GpuMaterial, vertices: &Vertices<'_>, options: &
     let frame = FrameUniforms::new(ctx, pipelines);
     let sun = Light::Directional { direction: Vec3::new(0.6, 0.5, 0.4), color: Vec3::ONE, intensity: 1.0 };
     frame.write_view(ctx, &view, &[sun], Vec3::splat(0.1), false).expect("frame");
-    let object = GpuObject::new(ctx, pipelines, Mat4::IDENTITY);
+    let object = GpuObject::new(ctx, pipelines, model);
+    let options = &PipelineOptions { front_face: object.front_face(options.front_face), ..options.clone() };
     let pipeline = pipelines
         .pipeline_with(device, material.technique, material.pixel_depth_offset, options)
         .expect("valid options")
@@ -214,6 +226,35 @@ fn new_material(g: &Gpu, m: &Material) -> GpuMaterial {
     gm.encode_rebuild(&g.ctx.device, &g.pipelines, &mut encoder, None);
     g.ctx.queue.submit([encoder.finish()]);
     gm
+}
+
+/// A model matrix that mirrors draws what the mesh mirrored on the CPU (`Mesh::transformed`,
+/// which swaps every triangle's winding and flips the tangents' handedness) draws with the
+/// identity: the same pixels covered, the same relief lit from the same side. Without the
+/// object's front face the mirrored plane is culled away; without the handedness flip its
+/// relief is traced and lit upside down in v.
+#[test]
+fn a_mirroring_model_matrix_draws_what_the_mirrored_mesh_draws() {
+    let Some(g) = gpu() else { return };
+    let mut g = g.lock().expect("gpu lock");
+    let m = mesh();
+    let gm = new_material(&g, &material(Technique::Pom, 0.06, false));
+    let own = PipelineOptions { color: COLOR, ..PipelineOptions::default() };
+    for mirror in [Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)), Mat4::from_scale(Vec3::new(1.0, 1.0, -1.0))] {
+        // Turned a little so that the mirror is not a symmetry of the picture.
+        let model = Mat4::from_rotation_y(0.4) * mirror;
+        let on_cpu = GpuMesh::new(&g.ctx, &m.transformed(model), None);
+        let reference = draw(&mut g, &gm, &Vertices::Pomkit(&on_cpu), &own);
+        let original = GpuMesh::new(&g.ctx, &m, None);
+        let mirrored = draw_model(&mut g, &gm, &Vertices::Pomkit(&original), &own, model);
+        let n_cover = covered(&reference).iter().filter(|&&c| c).count();
+        assert!(n_cover > (W * H / 8) as usize, "the mirrored plane covers {n_cover} pixels");
+        let same = covered(&reference).iter().zip(covered(&mirrored)).filter(|(a, b)| **a == *b).count();
+        assert!(same as u32 >= W * H - W, "coverage differs on {} pixels", (W * H) as usize - same);
+        let p = psnr(&reference.color, &mirrored.color);
+        println!("mirror scale {:?}: {p:.1} dB over {n_cover} pixels", mirror.to_scale_rotation_translation().0);
+        assert!(p >= 40.0, "the mirroring model matrix draws another picture: {p:.1} dB");
+    }
 }
 
 /// PSNR (dB) of the colours clamped to [0, 1] (pomkit's one PSNR, `compose::psnr`).

@@ -52,10 +52,16 @@ impl GpuMesh {
 }
 
 /// An object's model matrix (bind group 2).
+///
+/// A model matrix with a mirror (negative determinant) is drawn right: the shader flips the
+/// tangents' handedness, and the pipeline must take the opposite winding as the front, because
+/// the mirror reverses every triangle on screen: build it with
+/// `PipelineOptions { front_face: object.front_face(wgpu::FrontFace::Ccw), .. }`.
 pub struct GpuObject {
     /// The bind group to set at index 2.
     pub bind_group: wgpu::BindGroup,
     buffer: wgpu::Buffer,
+    mirrored: std::sync::atomic::AtomicBool,
 }
 
 impl GpuObject {
@@ -73,19 +79,42 @@ impl GpuObject {
             layout: &pipelines.object_layout,
             entries: &[wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() }],
         });
-        let o = Self { bind_group, buffer };
+        let o = Self { bind_group, buffer, mirrored: std::sync::atomic::AtomicBool::new(false) };
         o.set_model(ctx, model);
         o
     }
 
-    /// Sets the model matrix (normals use its cofactor matrix, sign-corrected for mirrors).
+    /// Sets the model matrix (normals use its cofactor matrix, sign-corrected for mirrors). The
+    /// last element of the normal matrix carries the determinant's sign, which flips the
+    /// tangents' handedness `w` under a mirror, as `Mesh::transformed` does on the CPU.
     pub fn set_model(&self, ctx: &GpuContext, model: Mat4) {
         let m = Mat3::from_mat4(model);
         let (c0, c1, c2) = (m.x_axis, m.y_axis, m.z_axis);
         let cof = Mat3::from_cols(c1.cross(c2), c2.cross(c0), c0.cross(c1));
-        let cof = if m.determinant() < 0.0 { -cof } else { cof };
+        let mirrored = m.determinant() < 0.0;
+        let cof = if mirrored { -cof } else { cof };
+        let mut normal_matrix = Mat4::from_mat3(cof);
+        normal_matrix.w_axis.w = if mirrored { -1.0 } else { 1.0 };
+        self.mirrored.store(mirrored, std::sync::atomic::Ordering::Relaxed);
         let mut u = Std140::new();
-        u.mat4(model).mat4(Mat4::from_mat3(cof));
+        u.mat4(model).mat4(normal_matrix);
         ctx.queue.write_buffer(&self.buffer, 0, &u.bytes());
+    }
+
+    /// Whether the model matrix mirrors (its determinant is negative).
+    #[must_use]
+    pub fn is_mirrored(&self) -> bool {
+        self.mirrored.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// The winding of front faces for this object in a pipeline whose meshes have `front` as
+    /// theirs: the opposite one when the model matrix mirrors (see [`GpuObject`]).
+    #[must_use]
+    pub fn front_face(&self, front: wgpu::FrontFace) -> wgpu::FrontFace {
+        match (self.is_mirrored(), front) {
+            (false, f) => f,
+            (true, wgpu::FrontFace::Ccw) => wgpu::FrontFace::Cw,
+            (true, wgpu::FrontFace::Cw) => wgpu::FrontFace::Ccw,
+        }
     }
 }
