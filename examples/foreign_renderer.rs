@@ -42,7 +42,12 @@ const NEAR: f32 = 0.05;
 /// Background and fog colour: linear values of the sRGB target (the pass's clear colour).
 const FOG: [f32; 3] = [0.62, 0.7, 0.78];
 
+#[expect(unsafe_code, reason = "ensure_runtime_dir sets an environment variable; no other thread runs yet")]
 fn main() -> std::process::ExitCode {
+    // Without XDG_RUNTIME_DIR (containers, CI, SSH), Mesa's Vulkan layers print a harmless
+    // error line on every device creation; this gives them a private directory.
+    // SAFETY: first thing in main, before any other thread starts.
+    unsafe { pomkit_gpu::context::ensure_runtime_dir() };
     match run() {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {

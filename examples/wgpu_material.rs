@@ -36,7 +36,12 @@ fn rippled_bricks(bricks: &HeightField, k: u32) -> HeightField {
     })
 }
 
+#[expect(unsafe_code, reason = "ensure_runtime_dir sets an environment variable; no other thread runs yet")]
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // 0. Optional: without XDG_RUNTIME_DIR (containers, CI, SSH), Mesa's Vulkan layers print a
+    //    harmless error line on every device creation; this gives them a private directory.
+    // SAFETY: first thing in main, before any other thread starts.
+    unsafe { pomkit_gpu::context::ensure_runtime_dir() };
     let out_path = std::env::args().nth(1).unwrap_or_else(|| "wgpu_material.png".into());
 
     // 1. Your device. (Here pomkit picks one; `GpuContext::from_device` wraps one you made.)

@@ -297,47 +297,16 @@ fn generate(args: &GenerateArgs) -> Result<()> {
     Ok(())
 }
 
-/// Gives the process a private runtime directory when `XDG_RUNTIME_DIR` is unset or not an
-/// absolute path to a directory: without one, Mesa's device-select Vulkan layer (through
-/// libwayland) prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment." twice
-/// on every GPU start, although nothing is wrong. The directory is
-/// `$TMPDIR/pomkit-runtime-UID`, mode 0700, created once and reused; when it cannot be made
-/// safely (not ours, not private, not a directory), the environment is left alone.
-#[cfg(unix)]
+/// Mesa's runtime-directory warning silenced (`pomkit_gpu::context::ensure_runtime_dir`).
 #[expect(
     unsafe_code,
-    reason = "std::env::set_var is unsafe in Rust 2024 because another thread may read the environment \
-              concurrently; this runs first thing in main, before pomkit or any library starts a thread"
+    reason = "ensure_runtime_dir sets an environment variable, unsafe in Rust 2024 because another thread \
+              may read the environment concurrently; this runs first thing in main, before pomkit or any \
+              library starts a thread"
 )]
 fn ensure_runtime_dir() {
-    let usable = std::env::var_os("XDG_RUNTIME_DIR").map(PathBuf::from).is_some_and(|d| d.is_absolute() && d.is_dir());
-    if usable {
-        return;
-    }
-    if let Some(dir) = private_runtime_dir() {
-        // SAFETY: single-threaded at this point (see the reason above); nothing holds a
-        // pointer into the environment.
-        unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir) };
-    }
-}
-
-#[cfg(not(unix))]
-fn ensure_runtime_dir() {}
-
-/// `$TMPDIR/pomkit-runtime-UID`, created with mode 0700 if absent; `None` unless it is a real
-/// directory (not a link) owned by this user and closed to everyone else.
-#[cfg(unix)]
-fn private_runtime_dir() -> Option<PathBuf> {
-    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
-    let uid = std::fs::metadata("/proc/self").ok()?.uid();
-    let dir = std::env::temp_dir().join(format!("pomkit-runtime-{uid}"));
-    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-        Err(_) => return None,
-    }
-    let meta = std::fs::symlink_metadata(&dir).ok()?;
-    (meta.is_dir() && meta.uid() == uid && meta.permissions().mode() & 0o077 == 0 && dir.is_absolute()).then_some(dir)
+    // SAFETY: single-threaded at this point (see the reason above).
+    unsafe { pomkit_gpu::context::ensure_runtime_dir() };
 }
 
 fn main() -> ExitCode {

@@ -561,3 +561,34 @@ fn a_cone_material_keeps_its_cones_in_step_with_its_heights() {
     rebuild(&gm);
     assert_eq!(pyramid_cones(&g, &gm), built);
 }
+
+/// The wgpu example, run where `XDG_RUNTIME_DIR` is unset (a container, CI), draws its picture
+/// and prints no error: without `context::ensure_runtime_dir`, Mesa's device-select layer
+/// prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment." twice. `cargo
+/// test` builds the examples beside the tests; a run of this test file alone may not have it.
+#[test]
+fn the_wgpu_example_prints_no_runtime_dir_error() {
+    if gpu().is_none() {
+        return;
+    }
+    let exe = std::env::current_exe().expect("test binary");
+    let Some(example) = exe.parent().and_then(|deps| deps.parent()).map(|d| d.join("examples/wgpu_material")) else {
+        return;
+    };
+    if !example.is_file() {
+        println!("skipping: {} is not built (`cargo test` builds the examples)", example.display());
+        return;
+    }
+    let png = std::env::temp_dir().join(format!("pomkit-wgpu-example-{}.png", std::process::id()));
+    let out = std::process::Command::new(&example)
+        .arg(&png)
+        .env_remove("XDG_RUNTIME_DIR")
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("the example runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains("XDG_RUNTIME_DIR"), "the example printed Mesa's runtime-directory error: {err}");
+    assert!(png.is_file(), "the example wrote no picture");
+    std::fs::remove_file(&png).expect("remove the picture");
+}
