@@ -47,7 +47,7 @@ fn main() -> std::process::ExitCode {
     // Without XDG_RUNTIME_DIR (containers, CI, SSH), Mesa's Vulkan layers print a harmless
     // error line on every device creation; this gives them a private directory.
     // SAFETY: first thing in main, before any other thread starts.
-    unsafe { pomkit_gpu::context::ensure_runtime_dir() };
+    unsafe { pomkit_gpu::util::ensure_runtime_dir() };
     match run() {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {

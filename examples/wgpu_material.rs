@@ -41,7 +41,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // 0. Optional: without XDG_RUNTIME_DIR (containers, CI, SSH), Mesa's Vulkan layers print a
     //    harmless error line on every device creation; this gives them a private directory.
     // SAFETY: first thing in main, before any other thread starts.
-    unsafe { pomkit_gpu::context::ensure_runtime_dir() };
+    unsafe { pomkit_gpu::util::ensure_runtime_dir() };
     let out_path = std::env::args().nth(1).unwrap_or_else(|| "wgpu_material.png".into());
 
     // 1. Your device. (Here pomkit picks one; `GpuContext::from_device` wraps one you made.)

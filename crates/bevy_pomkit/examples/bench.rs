@@ -121,7 +121,12 @@ fn methods() -> [Method; 4] {
     ]
 }
 
+#[expect(unsafe_code, reason = "ensure_runtime_dir sets an environment variable; no other thread runs yet")]
 fn main() {
+    // Without XDG_RUNTIME_DIR (containers, CI, SSH), Mesa's Vulkan layers print a harmless
+    // error line on every device creation; this gives them a private directory.
+    // SAFETY: first thing in main, before any other thread starts.
+    unsafe { pomkit_gpu::util::ensure_runtime_dir() };
     let args = Args::parse();
     let pattern: Pattern = match args.pattern.parse() {
         Ok(p) => p,

@@ -51,7 +51,12 @@ struct Args {
     output: PathBuf,
 }
 
+#[expect(unsafe_code, reason = "ensure_runtime_dir sets an environment variable; no other thread runs yet")]
 fn main() -> ExitCode {
+    // Without XDG_RUNTIME_DIR (containers, CI, SSH), Mesa's Vulkan layers print a harmless
+    // error line on every device creation; this gives them a private directory.
+    // SAFETY: first thing in main, before any other thread starts.
+    unsafe { pomkit_gpu::util::ensure_runtime_dir() };
     let args = Args::parse();
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,

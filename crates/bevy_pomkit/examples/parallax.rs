@@ -19,7 +19,12 @@ use bevy::prelude::*;
 use bevy_pomkit::{PomkitDebug, PomkitMaterial, PomkitPlugin, ShadowMode, Technique};
 use scene::{Method, SceneHandles, SceneOptions};
 
+#[expect(unsafe_code, reason = "ensure_runtime_dir sets an environment variable; no other thread runs yet")]
 fn main() {
+    // Without XDG_RUNTIME_DIR (containers, CI, SSH), Mesa's Vulkan layers print a harmless
+    // error line on every device creation; this gives them a private directory.
+    // SAFETY: first thing in main, before any other thread starts.
+    unsafe { pomkit_gpu::util::ensure_runtime_dir() };
     App::new()
         .add_plugins((
             DefaultPlugins.set(WindowPlugin {

@@ -297,7 +297,7 @@ fn generate(args: &GenerateArgs) -> Result<()> {
     Ok(())
 }
 
-/// Mesa's runtime-directory warning silenced (`pomkit_gpu::context::ensure_runtime_dir`).
+/// Mesa's runtime-directory warning silenced (`pomkit_gpu::util::ensure_runtime_dir`).
 #[expect(
     unsafe_code,
     reason = "ensure_runtime_dir sets an environment variable, unsafe in Rust 2024 because another thread \
@@ -306,7 +306,7 @@ fn generate(args: &GenerateArgs) -> Result<()> {
 )]
 fn ensure_runtime_dir() {
     // SAFETY: single-threaded at this point (see the reason above).
-    unsafe { pomkit_gpu::context::ensure_runtime_dir() };
+    unsafe { pomkit_gpu::util::ensure_runtime_dir() };
 }
 
 fn main() -> ExitCode {

@@ -140,3 +140,57 @@ pub fn trilinear_sampler(device: &wgpu::Device, edges: pomkit_core::EdgeMode, la
         ..Default::default()
     })
 }
+
+/// Gives the process a private runtime directory when `XDG_RUNTIME_DIR` is unset or not an
+/// absolute path to a directory. Without one, Mesa's device-select Vulkan layer (through
+/// libwayland) prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment." twice
+/// whenever a device is created, although nothing is wrong (a container, a CI job, an SSH
+/// session). The directory is `$TMPDIR/pomkit-runtime-UID`, mode 0700, created once and reused;
+/// when it cannot be made safely (not ours, not private, not a directory), the environment is
+/// left alone. Does nothing where there is no such variable to set (not unix).
+///
+/// # Safety
+/// It sets an environment variable (`std::env::set_var`): call it first thing in `main`,
+/// before any other thread starts, as the `pomkit` command line and the examples do.
+#[cfg(unix)]
+#[expect(
+    unsafe_code,
+    reason = "std::env::set_var is unsafe in Rust 2024 because another thread may read the environment \
+              concurrently; the caller promises that no other thread runs yet"
+)]
+pub unsafe fn ensure_runtime_dir() {
+    let usable = std::env::var_os("XDG_RUNTIME_DIR")
+        .map(std::path::PathBuf::from)
+        .is_some_and(|d| d.is_absolute() && d.is_dir());
+    if usable {
+        return;
+    }
+    if let Some(dir) = private_runtime_dir() {
+        // SAFETY: the caller guarantees that no other thread reads or writes the environment.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir) };
+    }
+}
+
+/// As on unix: nothing to do elsewhere.
+///
+/// # Safety
+/// None needed; `unsafe` only to match the unix signature.
+#[cfg(not(unix))]
+#[expect(unsafe_code, reason = "the same signature as on unix, where it sets an environment variable")]
+pub unsafe fn ensure_runtime_dir() {}
+
+/// `$TMPDIR/pomkit-runtime-UID`, created with mode 0700 if absent; `None` unless it is a real
+/// directory (not a link) owned by this user and closed to everyone else.
+#[cfg(unix)]
+fn private_runtime_dir() -> Option<std::path::PathBuf> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+    let uid = std::fs::metadata("/proc/self").ok()?.uid();
+    let dir = std::env::temp_dir().join(format!("pomkit-runtime-{uid}"));
+    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(_) => return None,
+    }
+    let meta = std::fs::symlink_metadata(&dir).ok()?;
+    (meta.is_dir() && meta.uid() == uid && meta.permissions().mode() & 0o077 == 0 && dir.is_absolute()).then_some(dir)
+}

@@ -563,7 +563,7 @@ fn a_cone_material_keeps_its_cones_in_step_with_its_heights() {
 }
 
 /// The wgpu example, run where `XDG_RUNTIME_DIR` is unset (a container, CI), draws its picture
-/// and prints no error: without `context::ensure_runtime_dir`, Mesa's device-select layer
+/// and prints no error: without `util::ensure_runtime_dir`, Mesa's device-select layer
 /// prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment." twice. `cargo
 /// test` builds the examples beside the tests; a run of this test file alone may not have it.
 #[test]

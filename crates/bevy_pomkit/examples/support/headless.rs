@@ -62,6 +62,7 @@ pub struct Headless {
     width: u32,
     height: u32,
     latest: Arc<Mutex<Option<Vec<u8>>>>,
+    readback: Entity,
 }
 
 /// A frame read back: linear RGBA, row by row from the top.
@@ -130,12 +131,16 @@ impl Headless {
         let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
         let latest = Arc::new(Mutex::new(None));
         let sink = latest.clone();
-        app.world_mut().spawn(Readback::texture(target.clone())).observe(move |done: On<ReadbackComplete>| {
-            if let Ok(mut slot) = sink.lock() {
-                *slot = Some(done.data.clone());
-            }
-        });
-        Self { app, target, width, height, latest }
+        let readback = app
+            .world_mut()
+            .spawn(Readback::texture(target.clone()))
+            .observe(move |done: On<ReadbackComplete>| {
+                if let Ok(mut slot) = sink.lock() {
+                    *slot = Some(done.data.clone());
+                }
+            })
+            .id();
+        Self { app, target, width, height, latest, readback }
     }
 
     /// The image the camera renders into.
@@ -206,6 +211,22 @@ impl Headless {
         Err(HeadlessError::Timeout(timeout))
     }
 
+    /// Stops reading frames back and lets the copies in flight land. Dropped with a copy still
+    /// mapping, Bevy's readback would find its receiver gone and log "Failed to send readback
+    /// result" at exit.
+    fn stop_reading_back(&mut self) {
+        let world = self.app.world_mut();
+        if world.get_entity(self.readback).is_err() {
+            return;
+        }
+        world.despawn(self.readback);
+        // A copy requested in the last frame is mapped during the next one and received in the
+        // one after.
+        for _ in 0..3 {
+            self.app.update();
+        }
+    }
+
     fn decode(&self, data: &[u8]) -> Frame {
         let row = self.width as usize * 8;
         let padded = row.div_ceil(256) * 256;
@@ -219,5 +240,11 @@ impl Headless {
             }
         }
         Frame { width: self.width, height: self.height, pixels }
+    }
+}
+
+impl Drop for Headless {
+    fn drop(&mut self) {
+        self.stop_reading_back();
     }
 }
