@@ -534,6 +534,7 @@ fn check_accessors(prim: &gltf::Primitive<'_>, buffers: &[gltf::buffer::Data]) -
             Some(name) => format!("accessor {} ({name:?}, {role})", acc.index()),
             None => format!("accessor {} ({role})", acc.index()),
         };
+        check_accessor_type(&role, &acc).map_err(|e| format!("{what}: {e}"))?;
         // An accessor without a view (sparse or all zeros) reads no buffer.
         let Some(view) = acc.view() else { continue };
         let buffer = view.buffer();
@@ -563,6 +564,38 @@ fn check_accessors(prim: &gltf::Primitive<'_>, buffers: &[gltf::buffer::Data]) -
                 view.length()
             ));
         }
+    }
+    Ok(())
+}
+
+/// Refuses an accessor whose element type is not the one glTF requires for what pomkit reads
+/// it as (specification 3.7.2.1: POSITION and NORMAL float VEC3, TANGENT float VEC4,
+/// TEXCOORD_0 VEC2 of floats or normalized unsigned bytes or shorts, indices unsigned SCALAR):
+/// the glTF reader asserts the element size and panics otherwise (found by fuzzing).
+/// Attributes pomkit does not read are not checked.
+fn check_accessor_type(role: &str, acc: &gltf::Accessor<'_>) -> Result<(), String> {
+    use gltf::accessor::{DataType, Dimensions};
+    let (dims, types, wanted): (Dimensions, &[DataType], &str) = match role {
+        "POSITION" | "NORMAL" => (Dimensions::Vec3, &[DataType::F32], "VEC3 of floats"),
+        "TANGENT" => (Dimensions::Vec4, &[DataType::F32], "VEC4 of floats"),
+        "TEXCOORD_0" => (
+            Dimensions::Vec2,
+            &[DataType::F32, DataType::U8, DataType::U16],
+            "VEC2 of floats, unsigned bytes or unsigned shorts",
+        ),
+        "indices" => (
+            Dimensions::Scalar,
+            &[DataType::U8, DataType::U16, DataType::U32],
+            "SCALAR of unsigned bytes, shorts or ints",
+        ),
+        _ => return Ok(()),
+    };
+    if acc.dimensions() != dims || !types.contains(&acc.data_type()) {
+        return Err(format!(
+            "its elements are {:?} of {:?}, but {role} must be a {wanted}",
+            acc.dimensions(),
+            acc.data_type()
+        ));
     }
     Ok(())
 }

@@ -132,6 +132,7 @@ fn reproducers_are_refused_with_their_cause() {
         ("obj", "line-element-index-overflow", "refers to no texture coordinate (vt)"),
         ("gltf", "position-accessor-out-of-range", "an attribute refers to accessor"),
         ("gltf", "glb-length-below-header", "its GLB header declares"),
+        ("gltf", "normal-accessor-wrong-type", "but NORMAL must be a VEC3 of floats"),
         ("normal_map", "exr-huge-chunk-oom", "its tiles are 3211328x16384 pixels"),
     ];
     for (name, file, needle) in cases {
