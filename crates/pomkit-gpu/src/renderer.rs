@@ -413,6 +413,31 @@ pub fn check_frame(limits: &wgpu::Limits, w: u32, h: u32, ss: u32) -> Result<(),
     Ok(())
 }
 
+/// The largest frame of at most `w x h` pixels, of the same shape (the aspect ratio kept to
+/// within a pixel), that [`check_frame`] admits with `ss x ss` supersampling and that is at most
+/// [`pomkit_core::MAX_SIZE`] a side: `(w, h)` itself when it fits. For a frame whose size
+/// follows a window (the viewer), which should shrink rather than fail. Each side is at least 1.
+#[must_use]
+pub fn largest_frame(limits: &wgpu::Limits, w: u32, h: u32, ss: u32) -> (u32, u32) {
+    let (w, h) = (w.max(1), h.max(1));
+    let fits = |k: f64| {
+        let side = |v: u32| ((f64::from(v) * k).floor() as u32).max(1);
+        let (a, b) = (side(w), side(h));
+        (a <= pomkit_core::MAX_SIZE && b <= pomkit_core::MAX_SIZE && check_frame(limits, a, b, ss).is_ok())
+            .then_some((a, b))
+    };
+    if let Some(whole) = fits(1.0) {
+        return whole;
+    }
+    // Bisect the scale: the checks are monotonic in it.
+    let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
+    for _ in 0..48 {
+        let mid = 0.5 * (lo + hi);
+        if fits(mid).is_some() { lo = mid } else { hi = mid }
+    }
+    fits(lo).unwrap_or((1, 1))
+}
+
 /// Checks an object's vertex and index buffers (`vertices` vertices, `indices` indices)
 /// against the device's `max_buffer_size` before they are created.
 ///
@@ -526,6 +551,28 @@ impl GpuScene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_largest_frame_fits_the_limits_and_keeps_the_shape() {
+        let limits = wgpu::Limits { max_texture_dimension_2d: 8192, max_buffer_size: 256 << 20, ..Default::default() };
+        // Fits already: unchanged.
+        assert_eq!(largest_frame(&limits, 1280, 720, 1), (1280, 720));
+        for (w, h, ss) in [(20000, 2000, 1), (9000, 300, 1), (3000, 5000, 2), (16384, 16384, 1), (12000, 9000, 1)] {
+            let (a, b) = largest_frame(&limits, w, h, ss);
+            assert!(check_frame(&limits, a, b, ss).is_ok(), "{w}x{h} -> {a}x{b}");
+            // The shape is kept to within a pixel (an 8192 clamp of one side alone would not).
+            let want = f64::from(w) / f64::from(h);
+            assert!((f64::from(a) / f64::from(b) - want).abs() <= want / f64::from(b.min(a)), "{w}x{h} -> {a}x{b}");
+            // And it is the largest: the same shape two pixels larger on its shorter side no
+            // longer fits.
+            let grow = 1.0 + 2.0 / f64::from(a.min(b));
+            let bigger = ((f64::from(a) * grow).ceil() as u32, (f64::from(b) * grow).ceil() as u32);
+            assert!(check_frame(&limits, bigger.0, bigger.1, ss).is_err(), "{w}x{h} -> {a}x{b} is not the largest");
+        }
+        // A side over MAX_SIZE on an adapter that would take it shrinks to MAX_SIZE.
+        let huge = wgpu::Limits { max_texture_dimension_2d: 65536, max_buffer_size: u64::MAX, ..Default::default() };
+        assert_eq!(largest_frame(&huge, 40000, 20000, 1), (pomkit_core::MAX_SIZE, pomkit_core::MAX_SIZE / 2));
+    }
 
     #[test]
     fn frames_over_the_limits_are_refused_with_what_to_do() {

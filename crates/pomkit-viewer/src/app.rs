@@ -190,9 +190,11 @@ impl ViewerApp {
     /// drags (`interacting`), changes render at half resolution; a press that changes nothing
     /// keeps the full-resolution picture.
     fn request(&mut self, size_px: [u32; 2], interacting: bool) {
+        // The renderer shrinks a frame the adapter cannot hold, keeping its shape
+        // (`pomkit_gpu::renderer::largest_frame`).
         let size = |scale: f32| {
-            let w = ((size_px[0] as f32 * scale).round() as u32).clamp(16, 8192);
-            let h = ((size_px[1] as f32 * scale).round() as u32).clamp(16, 8192);
+            let w = ((size_px[0] as f32 * scale).round() as u32).max(16);
+            let h = ((size_px[1] as f32 * scale).round() as u32).max(16);
             (w, h)
         };
         let compare =

@@ -332,9 +332,13 @@ impl ViewRenderer {
             Ok(s) => s,
             Err(e) => return fail(e.to_string()),
         };
+        // The largest frame of the view's shape that this adapter and pomkit's size limit
+        // admit (the picture is scaled to the view): a huge window shrinks rather than fails.
+        let (width, height) =
+            pomkit_gpu::renderer::largest_frame(&self.renderer.context().device.limits(), req.width, req.height, 1);
         let opts = RenderOptions {
-            width: req.width.max(1),
-            height: req.height.max(1),
+            width,
+            height,
             supersample: 1,
             mode: Mode::Material,
             aovs: true,

@@ -269,3 +269,27 @@ fn a_moved_camera_or_light_reuses_the_prepared_scene_and_draws_the_same_picture(
     retained.render(&request(deeper, compare)).images.expect("renders");
     assert!(!retained.reused());
 }
+
+/// A view wider than the adapter's largest texture (a very wide window, or a high scale factor)
+/// renders the largest frame of its shape that the adapter holds, instead of failing (or, with a
+/// fixed clamp of each side, stretching the picture).
+#[test]
+fn a_view_larger_than_the_adapter_shrinks_and_keeps_its_shape() {
+    if !gpu_available() {
+        return;
+    }
+    use pomkit_viewer::view::{ViewRenderer, ViewRequest};
+    let ctx = pomkit_gpu::GpuContext::new().expect("adapter");
+    let limits = ctx.device.limits();
+    let (w, h) = (limits.max_texture_dimension_2d.saturating_mul(2).min(60000), 60);
+    let mut view = ViewRenderer::new(ctx);
+    let result = view.render(&ViewRequest::new(SceneDoc::default(), w, h));
+    let images = result.images.expect("the view renders");
+    let image = &images[0];
+    let (a, b) = pomkit_gpu::renderer::largest_frame(&limits, w, h, 1);
+    assert_eq!((image.width, image.height), (a, b));
+    assert!(image.width <= limits.max_texture_dimension_2d && image.width >= limits.max_texture_dimension_2d / 2);
+    let want = f64::from(w) / f64::from(h);
+    let got = f64::from(image.width) / f64::from(image.height);
+    assert!((got - want).abs() / want < 0.05, "shape {}x{} for a {w}x{h} view", image.width, image.height);
+}
