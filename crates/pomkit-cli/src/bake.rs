@@ -38,7 +38,8 @@ pub struct BakeInputs {
     /// for a procedural one (bricks, pyramids, cobblestones, text, spike, waves, fur, grass), optionally
     /// sized as `builtin:NAME:WxH` (default 512x512). Several inputs, folders (their png, jpg,
     /// tif and exr files) and quoted globs bake a whole library: OUT is then a folder (see
-    /// --name, --recursive).
+    /// --name, --recursive). A FIFO (named pipe) is read once a program writes to it: pomkit
+    /// waits 10 s for one to open it, then gives up.
     #[arg(value_name = "IN", required = true, num_args = 1..)]
     pub(crate) inputs: Vec<String>,
     #[command(flatten)]

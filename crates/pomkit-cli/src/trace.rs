@@ -77,7 +77,8 @@ pub fn run(a: &TraceArgs) -> Result<()> {
     let (reader, name): (Box<dyn BufRead>, String) = if output::is_stdout(&a.rays) {
         (Box::new(std::io::stdin().lock()), "<stdin>".to_owned())
     } else {
-        let file = File::open(&a.rays).with_context(|| format!("cannot read rays file {}", a.rays.display()))?;
+        let file = pomkit_io::read::open_input(&a.rays)
+            .with_context(|| format!("cannot read rays file {}", a.rays.display()))?;
         (Box::new(BufReader::new(file)), a.rays.display().to_string())
     };
     let mut rays = RayReader::new(reader, &name)?;

@@ -428,3 +428,37 @@ fn normalize_on_the_extremes_of_f32_rescales_them_exactly() {
     assert_eq!(a, b);
     assert!(a.iter().all(|n| n.iter().all(|c| c.is_finite())));
 }
+
+// ---------------------------------------------------------------------------------------------
+// A FIFO as the input of a single bake
+// ---------------------------------------------------------------------------------------------
+
+/// A FIFO (named pipe) that nothing writes to is given up on after the documented wait, with
+/// the reason, instead of blocking forever in `open`; one that a program writes to is read.
+#[cfg(unix)]
+#[test]
+fn a_fifo_with_no_writer_is_given_up_on_and_one_with_a_writer_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("pipe.png");
+    assert!(Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs").success());
+    let started = std::time::Instant::now();
+    // (Not `refuses`: its snapshot of the folder would itself block reading the FIFO.)
+    let out = pomkit(&["bake", "normal", "pipe.png", "-o", "n.png"], dir.path());
+    let msg = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{msg}");
+    for needle in ["pipe.png", "FIFO", "no program opened it for writing within 10 s"] {
+        assert!(msg.contains(needle), "{needle:?} missing from: {msg}");
+    }
+    assert!(!dir.path().join("n.png").exists());
+    assert!(started.elapsed() < std::time::Duration::from_secs(60), "the wait is bounded");
+    // A writer: the map arrives through the pipe and is baked.
+    let png = dir.path().join("h.png");
+    let made = pomkit(&["generate", "bricks", "--size", "32x32", "-o", "h.png"], dir.path());
+    assert!(made.status.success(), "{}", stderr(&made));
+    let mut writer =
+        Command::new("sh").arg("-c").arg("cat \"$0\" > \"$1\"").arg(&png).arg(&fifo).spawn().expect("sh runs");
+    let out = pomkit(&["bake", "normal", "pipe.png", "-o", "n.png"], dir.path());
+    writer.wait().expect("the writer ends");
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.path().join("n.png").is_file());
+}

@@ -40,8 +40,44 @@ const SIGNATURE_BYTES: usize = 64;
 /// than `cap` (a regular file is refused before reading; anything else once `cap` bytes have
 /// been read); [`std::io::ErrorKind::OutOfMemory`] when the bytes cannot be allocated.
 pub fn read_capped(path: &Path, cap: u64, what: &str) -> std::io::Result<Vec<u8>> {
-    let mut file = std::fs::File::open(path)?;
+    let mut file = open_input(path)?;
     read_rest(&mut file, Vec::new(), cap, what)
+}
+
+/// How long an input that is a FIFO (a named pipe) is waited for a program to open it for
+/// writing: opening a FIFO blocks until one does, which would otherwise hang forever.
+pub const FIFO_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Opens an input file for reading. A FIFO (a named pipe; also `/dev/fd/N` of a shell's process
+/// substitution, whose writer is already there) is opened on a helper thread and given
+/// [`FIFO_WAIT`] to find a writer; everything else is opened as usual.
+///
+/// # Errors
+/// The operating system's error; [`std::io::ErrorKind::TimedOut`] for a FIFO that no program
+/// opened for writing in time.
+pub fn open_input(path: &Path) -> std::io::Result<std::fs::File> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if std::fs::metadata(path).is_ok_and(|m| m.file_type().is_fifo()) {
+            let (tx, rx) = std::sync::mpsc::channel();
+            let owned = path.to_owned();
+            // Left blocked in `open` when nothing ever writes: the process exits without it.
+            std::thread::spawn(move || {
+                let _ = tx.send(std::fs::File::open(owned));
+            });
+            return rx.recv_timeout(FIFO_WAIT).unwrap_or_else(|_| {
+                Err(std::io::Error::new(
+                    std::io::ErrorKind::TimedOut,
+                    format!(
+                        "it is a FIFO (named pipe) and no program opened it for writing within {} s",
+                        FIFO_WAIT.as_secs()
+                    ),
+                ))
+            });
+        }
+    }
+    std::fs::File::open(path)
 }
 
 /// Reads the rest of `file` after `head` (already read from it), refusing more than `cap`
@@ -83,7 +119,7 @@ fn read_rest(file: &mut std::fs::File, head: Vec<u8>, cap: u64, what: &str) -> s
 /// [`IoError::NotAnImage`] when the first bytes are not an image format's signature.
 pub fn read_image_file(path: &Path) -> Result<Vec<u8>, IoError> {
     let read_err = |reason| IoError::Read { path: path.to_owned(), reason };
-    let mut file = std::fs::File::open(path).map_err(read_err)?;
+    let mut file = open_input(path).map_err(read_err)?;
     if file.metadata().map_err(read_err)?.is_dir() {
         return Err(read_err(std::io::Error::new(std::io::ErrorKind::IsADirectory, "it is a folder, not a file")));
     }
