@@ -250,12 +250,12 @@ impl Renderer {
         let what = || {
             let largest =
                 sizes.largest_texture().map_or_else(String::new, |(w, h)| format!(", the largest map {w}x{h}"));
+            let n = sizes.objects.len();
             format!(
-                "{} of {} ({} objects, {} triangles{largest})",
+                "{} of {} ({n} object{}, {triangles} triangles{largest})",
                 pomkit_cpu::describe_job(opts),
                 path.display(),
-                sizes.objects.len(),
-                triangles
+                if n == 1 { "" } else { "s" },
             )
         };
         let cpu = || -> Result<(), pomkit_core::memory::MemoryError> {

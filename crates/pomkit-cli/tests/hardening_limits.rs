@@ -95,7 +95,7 @@ fn displaced_geometry_of_a_large_height_map_is_refused_and_a_small_one_renders()
         dir.path(),
         &[LOW],
         &[
-            "render of 64x36 of displaced geometry of big.toml (1 objects, 8 triangles, the largest map 4096x4096) \
+            "render of 64x36 of displaced geometry of big.toml (1 object, 8 triangles, the largest map 4096x4096) \
              needs about",
             "1.0 GiB is available",
             "technique other than displaced",
