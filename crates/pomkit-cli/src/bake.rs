@@ -379,6 +379,19 @@ fn prepare(
     Ok((field, outs, id))
 }
 
+/// The output's `n` texels, allocated fallibly: an estimate that was too low ends in an error
+/// naming the input, not in the allocator's abort (docs/LIMITS.md).
+fn output_buffer<T: Clone>(value: T, n: usize, input: &str) -> Result<Vec<T>> {
+    pomkit_core::memory::try_vec(value, n).map_err(|e| {
+        anyhow::Error::from(pomkit_core::memory::MemoryError::Allocation {
+            what: format!("the baked map of {input}"),
+            bytes: pomkit_core::memory::bytes_of::<T>(n as u64),
+            reason: e.to_string(),
+            advice: "bake a smaller height map".to_owned(),
+        })
+    })
+}
+
 /// Bakes `job` from the height map `input` into `output`, atomically; `bars` shows progress
 /// bars for big maps (single mode; a batch shows its own). Returns the map's size.
 pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Result<(u32, u32)> {
@@ -396,7 +409,7 @@ pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Re
     let tick = |rows: u32| pb.inc(u64::from(rows));
     match job.kind {
         Kind::Normal(encoding @ (NormalEncoding::Rgb8 | NormalEncoding::Rg8)) => {
-            let mut px = vec![[0u8; 3]; field.depths().len()];
+            let mut px = output_buffer([0u8; 3], field.depths().len(), input)?;
             bake::bake_normals_rgb8(&field, &opts, &mut px, &tick)?;
             if encoding == NormalEncoding::Rg8 {
                 // Two-channel storage: z is rebuilt on read (eq. 7.44), blue carries nothing.
@@ -406,7 +419,7 @@ pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Re
             outs.write_image(id, w, h, layout, Pixels::U8(px.as_flattened()))?;
         }
         Kind::Normal(NormalEncoding::Float) => {
-            let mut px = vec![[0.0f32; 3]; field.depths().len()];
+            let mut px = output_buffer([0.0f32; 3], field.depths().len(), input)?;
             bake::bake_normals_into(&field, &opts, &mut px, |n| n.to_array(), &tick)?;
             pb.finish_and_clear();
             outs.write_image(id, w, h, layout, Pixels::F32(px.as_flattened()))?;

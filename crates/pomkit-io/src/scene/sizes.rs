@@ -153,3 +153,54 @@ impl Loader<'_> {
         .map_err(|e| self.invalid("scene", "material", e.to_string()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_come_from_built_in_names_image_headers_and_shape_counts() {
+        let dir = tempfile::tempdir().unwrap();
+        image::RgbImage::new(10, 20).save(dir.path().join("a.png")).unwrap();
+        let scene = r#"
+[camera]
+eye = [0.0, 1.0, 2.0]
+target = [0.0, 0.0, 0.0]
+
+[[material]]
+name = "m"
+height = "builtin:waves:300x200"
+albedo = "a.png"
+technique = "cone"
+
+[[material]]
+name = "n"
+height = "missing.png"
+
+[[object]]
+mesh = "sphere"
+rings = 4
+segments = 8
+material = "n"
+
+[[object]]
+mesh = "model.obj"
+material = "m"
+"#;
+        std::fs::write(dir.path().join("s.toml"), scene).unwrap();
+        let s = scene_sizes(&dir.path().join("s.toml")).unwrap();
+        assert_eq!(s.materials[0].height, Some((300, 200)));
+        assert!(s.materials[0].height_builtin);
+        assert_eq!(s.materials[0].albedo, Some((10, 20)));
+        assert!(!s.materials[0].albedo_builtin);
+        assert_eq!(s.materials[0].technique, Technique::Cone);
+        // A file that cannot be read has no size here: its load reports it.
+        assert_eq!(s.materials[1].height, None);
+        // The sphere's grid with poles: (4 + 3) x (8 + 3) vertices, 2 x 5 x 9 triangles at most.
+        assert_eq!(s.objects[0], ObjectSizes { material: Some(1), vertices: 77, triangles: 90 });
+        assert_eq!(s.objects[1], ObjectSizes { material: Some(0), vertices: 0, triangles: 0 });
+        assert_eq!(s.largest_texture(), Some((300, 200)));
+        // Generated heights 8 bytes a texel, a decoded colour map 12.
+        assert_eq!(s.texture_bytes(), 300 * 200 * 8 + 10 * 20 * 12);
+    }
+}
