@@ -219,7 +219,7 @@ pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField>
         pomkit_core::memory::check(
             || format!("generating {input}"),
             height_load_bytes(input, w, h),
-            "use a smaller size",
+            "use a smaller size (builtin:NAME:WxH)",
         )?;
         let field = progress::rows(h, w, &format!("generating {name} {w}x{h}"), |tick| {
             procedural::generate_with_progress(pattern, w, h, tick)
@@ -236,8 +236,8 @@ pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField>
 }
 
 /// The bytes loading the height map `input` of `w` x `h` takes: a built-in's values and its
-/// field (8 bytes a texel, and 8 more for `--depth-map`'s inversion), or a file's field (its
-/// decoded pixels are checked as it is read).
+/// field, and their copies when `--depth-map` inverts it (16 bytes a texel), or a file's field
+/// (its decoded pixels are checked as it is read).
 pub(crate) fn height_load_bytes(input: &str, w: u32, h: u32) -> u64 {
     let n = u64::from(w) * u64::from(h);
     if input.starts_with("builtin:") { n * 16 } else { n * 4 }
