@@ -251,6 +251,25 @@ impl Kind {
         }
     }
 
+    /// What baking a `w` x `h` map makes, for messages, and an upper bound on the bytes it
+    /// allocates besides the height field: the output, the encoder's copy, and the pyramid or
+    /// the cones being built.
+    fn job(self, w: u32, h: u32) -> (String, u64) {
+        let n = u64::from(w) * u64::from(h);
+        match self {
+            Kind::Normal(NormalEncoding::Rgb8 | NormalEncoding::Rg8) => {
+                (format!("a normal map of a {w}x{h} map"), n * 6)
+            }
+            Kind::Normal(NormalEncoding::Float) => (format!("a float normal map of a {w}x{h} map"), n * 24),
+            Kind::Parallax(_) => (format!("a parallax map of a {w}x{h} map"), n * 9),
+            Kind::Pack => (format!("a packed map of a {w}x{h} map"), n * 8),
+            // The pyramid (4/3 of the texels in f32) and its atlas (1.5 times the texels in
+            // u16, and the encoder's copy).
+            Kind::Maxmip => (format!("the maximum-height pyramid of a {w}x{h} map"), n * 12),
+            Kind::Cone { .. } => (format!("the cone map of a {w}x{h} map"), ConeMap::build_bytes(w, h)),
+        }
+    }
+
     /// The output file's extension.
     pub(crate) fn extension(self) -> &'static str {
         if self.layout().is_float() { "exr" } else { "png" }
@@ -322,8 +341,9 @@ fn prepare(
     read: &HeightRead,
     opts: &NormalBakeOptions,
     output: &Path,
-    layout: PixelLayout,
+    kind: Kind,
 ) -> Result<(HeightField, Outputs, OutputId)> {
+    let layout = kind.layout();
     pomkit_io::check_output(output, layout)?;
     if !(opts.scale.is_finite() && opts.scale.abs() <= bake::MAX_SCALE) {
         anyhow::bail!(
@@ -339,9 +359,38 @@ fn prepare(
     }
     let id = outs.output(output);
     outs.check()?;
+    // The whole bake against the memory budget before a built-in map is generated; an image
+    // file's reading is checked from its header before it is decoded, and the bake once it is
+    // read (docs/LIMITS.md).
+    let builtin = input.starts_with("builtin:");
+    if builtin && let Some((w, h)) = pomkit_io::scene::texture_size(Path::new("."), input) {
+        let (what, bytes) = kind.job(w, h);
+        pomkit_core::memory::check(
+            || format!("baking {what} ({input})"),
+            bytes.saturating_add(crate::height_load_bytes(input, w, h)),
+            "bake a smaller height map",
+        )?;
+    }
     let field = crate::load_height(input, read)?;
+    if !builtin {
+        let (what, bytes) = kind.job(field.width(), field.height());
+        pomkit_core::memory::check(|| format!("baking {what} ({input})"), bytes, "bake a smaller height map")?;
+    }
     opts.validate(&field).with_context(|| format!("cannot bake {input}"))?;
     Ok((field, outs, id))
+}
+
+/// The output's `n` texels, allocated fallibly: an estimate that was too low ends in an error
+/// naming the input, not in the allocator's abort (docs/LIMITS.md).
+fn output_buffer<T: Clone>(value: T, n: usize, input: &str) -> Result<Vec<T>> {
+    pomkit_core::memory::try_vec(value, n).map_err(|e| {
+        anyhow::Error::from(pomkit_core::memory::MemoryError::Allocation {
+            what: format!("the baked map of {input}"),
+            bytes: pomkit_core::memory::bytes_of::<T>(n as u64),
+            reason: e.to_string(),
+            advice: "bake a smaller height map".to_owned(),
+        })
+    })
 }
 
 /// Bakes `job` from the height map `input` into `output`, atomically; `bars` shows progress
@@ -349,7 +398,7 @@ fn prepare(
 pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Result<(u32, u32)> {
     let opts = job.slope.options(job.y_down);
     let layout = job.kind.layout();
-    let (field, mut outs, id) = prepare(input, &job.read, &opts, output, layout)?;
+    let (field, mut outs, id) = prepare(input, &job.read, &opts, output, job.kind)?;
     let (w, h) = (field.width(), field.height());
     // A cone costs many texels' worth of a normal map: its bar shows for smaller maps.
     let weight = if matches!(job.kind, Kind::Cone { .. }) { crate::CONE_TEXEL_WEIGHT } else { 1 };
@@ -361,7 +410,7 @@ pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Re
     let tick = |rows: u32| pb.inc(u64::from(rows));
     match job.kind {
         Kind::Normal(encoding @ (NormalEncoding::Rgb8 | NormalEncoding::Rg8)) => {
-            let mut px = vec![[0u8; 3]; field.depths().len()];
+            let mut px = output_buffer([0u8; 3], field.depths().len(), input)?;
             bake::bake_normals_rgb8(&field, &opts, &mut px, &tick)?;
             if encoding == NormalEncoding::Rg8 {
                 // Two-channel storage: z is rebuilt on read (eq. 7.44), blue carries nothing.
@@ -371,7 +420,7 @@ pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Re
             outs.write_image(id, w, h, layout, Pixels::U8(px.as_flattened()))?;
         }
         Kind::Normal(NormalEncoding::Float) => {
-            let mut px = vec![[0.0f32; 3]; field.depths().len()];
+            let mut px = output_buffer([0.0f32; 3], field.depths().len(), input)?;
             bake::bake_normals_into(&field, &opts, &mut px, |n| n.to_array(), &tick)?;
             pb.finish_and_clear();
             outs.write_image(id, w, h, layout, Pixels::F32(px.as_flattened()))?;
@@ -400,9 +449,16 @@ pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Re
                 needed,
                 "bake a smaller height map",
             )?;
-            let pyramid = MaxHeightPyramid::new(&field, opts.edges);
+            // No rows to count: a spinner, so a big map does not look like a hang.
+            let texels = if bars { u64::from(w) * u64::from(h) } else { 0 };
+            let (pyramid, atlas) = progress::spinner(texels, "building the pyramid", || {
+                let pyramid = MaxHeightPyramid::new(&field, opts.edges);
+                let atlas = pyramid.atlas_gray16();
+                (pyramid, atlas)
+            });
             let (aw, ah) = pyramid.atlas_size();
-            outs.write_image(id, aw, ah, layout, Pixels::U16(&pyramid.atlas_gray16()))?;
+            drop(pyramid);
+            progress::spinner(texels, "encoding", || outs.write_image(id, aw, ah, layout, Pixels::U16(&atlas)))?;
         }
         Kind::Cone { relaxed } => {
             pomkit_core::memory::check(

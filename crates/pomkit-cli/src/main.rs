@@ -216,6 +216,11 @@ pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField>
         let (name, size) = spec.split_once(':').unwrap_or((spec, "512x512"));
         let pattern: Pattern = name.parse().with_context(|| format!("input {input}"))?;
         let (w, h) = parse_size(size).with_context(|| format!("input {input}"))?;
+        pomkit_core::memory::check(
+            || format!("generating {input}"),
+            height_load_bytes(input, w, h),
+            "use a smaller size (builtin:NAME:WxH)",
+        )?;
         let field = progress::rows(h, w, &format!("generating {name} {w}x{h}"), |tick| {
             procedural::generate_with_progress(pattern, w, h, tick)
         });
@@ -228,6 +233,14 @@ pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField>
     }
     let opts = HeightLoadOptions { depth_map: read.depth_map, channel: read.channel.into(), normalize: read.normalize };
     Ok(pomkit_io::load_height_field(&PathBuf::from(input), &opts)?)
+}
+
+/// The bytes loading the height map `input` of `w` x `h` takes: a built-in's values and its
+/// field, and their copies when `--depth-map` inverts it (16 bytes a texel), or a file's field
+/// (its decoded pixels are checked as it is read).
+pub(crate) fn height_load_bytes(input: &str, w: u32, h: u32) -> u64 {
+    let n = u64::from(w) * u64::from(h);
+    if input.starts_with("builtin:") { n * 16 } else { n * 4 }
 }
 
 /// Parses `WxH` with both sides in 1..=[`pomkit_core::MAX_SIZE`] (16384).
@@ -273,6 +286,11 @@ fn generate(args: &GenerateArgs) -> Result<()> {
     }
     outs.check()?;
     let what = format!("{} {w}x{h}", pattern.name());
+    // Before the work: the values and the field (8 bytes a texel), the 16-bit samples and the
+    // encoder's copy (4), and the colour map's texels and copy (6).
+    let texels = u64::from(w) * u64::from(h);
+    let needed = texels * (8 + 4) + if args.albedo.is_some() { texels * 6 } else { 0 };
+    pomkit_core::memory::check(|| format!("generating {what}"), needed, "use a smaller --size")?;
     let field =
         progress::rows(h, w, &format!("height {what}"), |tick| procedural::generate_with_progress(pattern, w, h, tick));
     let samples: Vec<u16> = field.heights().iter().map(|&v| (v * 65535.0).round() as u16).collect();
@@ -312,6 +330,12 @@ fn ensure_runtime_dir() {
 fn main() -> ExitCode {
     ensure_runtime_dir();
     let cli = Cli::parse();
+    // The memory budget's variable (POMKIT_MEMORY_LIMIT): a value that is not a size is bad
+    // input, reported as such before any file is read (docs/LIMITS.md).
+    if let Err(e) = pomkit_core::memory::available_bytes() {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     // The CPU renderer's SIMD level (POMKIT_SIMD): a value it does not know is bad input.
     if let Err(e) = pomkit_cpu::Simd8::from_env() {
         eprintln!("error: {e}");

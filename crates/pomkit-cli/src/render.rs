@@ -10,6 +10,7 @@ use pomkit_core::trace::Technique;
 use pomkit_cpu::{CpuRenderer, Mode, RenderOptions, RenderOutput};
 use pomkit_gpu::{GpuRenderError, GpuRenderer};
 use pomkit_io::output::{OutputId, Outputs};
+use pomkit_io::scene::SceneSizes;
 use pomkit_io::{PixelLayout, Pixels};
 
 use crate::backend::{self, Backend, Opened};
@@ -114,13 +115,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
     }
     outs.check()?;
-    let scene = match &a.scene {
-        Some(path) => pomkit_io::scene::load_scene(path)?,
-        None => pomkit_core::demo::demo_scene(),
-    };
     let mut renderer = Renderer::open(a.backend)?;
     let all_modes: Vec<Mode> = if modes.is_empty() { vec![mode] } else { modes.iter().map(|(_, m)| *m).collect() };
-    let _cones = build_cones(&scene, &all_modes);
     let base = RenderOptions {
         width: w,
         height: h,
@@ -132,6 +128,24 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         displaced_tolerance: a.displaced_tolerance * a.supersample as f32,
         ..Default::default()
     };
+    // The whole job against the memory budget before the scene is built: the sizes of its maps
+    // and shapes are known from the file and the images' headers (docs/LIMITS.md).
+    if let Some(path) = &a.scene {
+        let sizes = pomkit_io::scene::scene_sizes(path)?;
+        for m in &all_modes {
+            renderer.check_sizes(&sizes, &RenderOptions { mode: *m, ..base }, path)?;
+        }
+    }
+    let scene = match &a.scene {
+        // Generating big built-in maps and shapes reports no progress: a spinner, so it does
+        // not look like a hang.
+        Some(path) => {
+            let work = pomkit_io::scene::scene_sizes(path).map_or(0, |s| scene_work(&s));
+            progress::spinner(work, &format!("loading {}", path.display()), || pomkit_io::scene::load_scene(path))?
+        }
+        None => pomkit_core::demo::demo_scene(),
+    };
+    let _cones = build_cones(&scene, &all_modes);
     if modes.is_empty() {
         let out = renderer.render(&scene, &base, "rendering")?;
         write_png(&mut outs, png, &image_of(&out))?;
@@ -220,6 +234,97 @@ impl Renderer {
         Ok(Self { gpu, fallback: backend == Backend::Auto })
     }
 
+    /// Refuses a render of the scene file `path` (of `sizes`) with `opts` that will not fit in
+    /// memory on the renderer that will draw it, before anything is built: the scene's maps
+    /// and shapes as loaded, and the renderer's own estimate ([`pomkit_cpu::estimate_from_sizes`],
+    /// [`pomkit_gpu::renderer::material_host_bytes`]). With `--backend auto` a render the GPU
+    /// cannot hold is drawn on the CPU, so it passes when the CPU's estimate fits.
+    fn check_sizes(&self, sizes: &SceneSizes, opts: &RenderOptions, path: &Path) -> Result<()> {
+        let on_gpu = self.gpu.is_some() && !(self.fallback && opts.mode == Mode::Displaced);
+        let loading = sizes.texture_bytes();
+        let material = |i: Option<usize>| i.and_then(|i| sizes.materials.get(i));
+        let displaced =
+            |i: Option<usize>| opts.mode == Mode::Displaced && material(i).is_some_and(|m| m.height.is_some());
+        let texels = |s: Option<(u32, u32)>| s.map_or(0, |(w, h)| u64::from(w) * u64::from(h));
+        let triangles = sizes.triangles();
+        let what = || {
+            let largest =
+                sizes.largest_texture().map_or_else(String::new, |(w, h)| format!(", the largest map {w}x{h}"));
+            let n = sizes.objects.len();
+            format!(
+                "{} of {} ({n} object{}, {triangles} triangles{largest})",
+                pomkit_cpu::describe_job(opts),
+                path.display(),
+                if n == 1 { "" } else { "s" },
+            )
+        };
+        let cpu = || -> Result<(), pomkit_core::memory::MemoryError> {
+            let mut drawn = 0u64;
+            let mut streamed = 0u64;
+            for o in &sizes.objects {
+                if displaced(o.material) {
+                    streamed = streamed.saturating_add(texels(material(o.material).and_then(|m| m.height)));
+                } else {
+                    drawn = drawn.saturating_add(o.triangles);
+                }
+            }
+            let largest = sizes.objects.iter().map(|o| o.vertices).max().unwrap_or(0);
+            let mats: Vec<pomkit_cpu::MaterialSize> = sizes
+                .materials
+                .iter()
+                .map(|m| pomkit_cpu::MaterialSize {
+                    height: m.height,
+                    albedo: m.albedo,
+                    cone: opts.mode.technique(m.technique) == Technique::Cone,
+                })
+                .collect();
+            let e = pomkit_cpu::estimate_from_sizes(opts, drawn, largest, streamed, &mats);
+            pomkit_core::memory::check(
+                what,
+                e.total().saturating_add(loading),
+                &pomkit_cpu::advice_for(opts, triangles),
+            )
+        };
+        if !on_gpu {
+            check_time(sizes, opts, path)?;
+            return cpu().context("cannot render");
+        }
+        let (w, h, ss) = (opts.width, opts.height, opts.supersample.clamp(1, 8));
+        let mut gpu_bytes = pomkit_gpu::renderer::frame_host_bytes(w, h, ss, opts.aovs).saturating_add(loading);
+        for m in &sizes.materials {
+            let cone = opts.mode.technique(m.technique) == Technique::Cone;
+            gpu_bytes = gpu_bytes.saturating_add(pomkit_gpu::renderer::material_host_bytes(
+                m.height,
+                m.albedo,
+                m.normal_map,
+                cone,
+            ));
+        }
+        for o in &sizes.objects {
+            let (verts, tris) = if displaced(o.material) {
+                // The whole subdivided mesh: about two triangles a texel, held to the cap.
+                let tris = texels(material(o.material).and_then(|m| m.height))
+                    .saturating_mul(2)
+                    .clamp(o.triangles, pomkit_core::mesh::MAX_DISPLACED_TRIANGLES.max(o.triangles));
+                (o.vertices.saturating_add(tris), tris)
+            } else {
+                (o.vertices, o.triangles)
+            };
+            gpu_bytes = gpu_bytes.saturating_add(pomkit_gpu::renderer::mesh_host_bytes(verts, tris).saturating_mul(2));
+        }
+        let gpu = pomkit_core::memory::check(
+            || format!("{} on the GPU", what()),
+            gpu_bytes,
+            "use a smaller --size, smaller height and colour maps, fewer or coarser meshes, or --backend cpu",
+        );
+        match gpu {
+            Ok(()) => Ok(()),
+            // `--backend auto` draws it on the CPU when the GPU renderer refuses it.
+            Err(_) if self.fallback => cpu().context("cannot render"),
+            Err(e) => Err(e).context("cannot render"),
+        }
+    }
+
     /// Renders one frame (`what` labels the progress and errors) and checks it is finite.
     fn render(&mut self, scene: &Scene, opts: &RenderOptions, what: &str) -> Result<RenderOutput> {
         let ss = opts.supersample.max(1);
@@ -255,6 +360,45 @@ impl Renderer {
         }
         Ok(out)
     }
+}
+
+/// The texels and vertices a scene's loading generates: the measure of its spinner.
+fn scene_work(sizes: &SceneSizes) -> u64 {
+    let texels = |s: Option<(u32, u32)>| s.map_or(0, |(w, h)| u64::from(w) * u64::from(h));
+    let maps = sizes.materials.iter().map(|m| texels(m.height) + texels(m.albedo)).sum::<u64>();
+    maps.saturating_add(sizes.objects.iter().map(|o| o.vertices).sum::<u64>())
+}
+
+/// The environment variable that lets a render through [`check_time`].
+pub(crate) const ALLOW_SLOW_VAR: &str = "POMKIT_ALLOW_SLOW";
+
+/// Triangles a CPU render may set up per sample before it is refused as out of proportion.
+const TRIANGLES_PER_SAMPLE: u64 = 256;
+
+/// Triangles below which a CPU render is never refused for its time.
+const SLOW_TRIANGLES: u64 = 16_000_000;
+
+/// Refuses a CPU render whose meshes are out of all proportion to its frame (more than
+/// [`TRIANGLES_PER_SAMPLE`] triangles a sample, and over [`SLOW_TRIANGLES`]): every triangle
+/// is built, transformed and set up, which takes minutes for a picture of a few thousand
+/// pixels (docs/LIMITS.md). [`ALLOW_SLOW_VAR`]`=1` lets it run.
+fn check_time(sizes: &SceneSizes, opts: &RenderOptions, path: &Path) -> Result<()> {
+    let ss = u64::from(opts.supersample.clamp(1, 8));
+    let samples = u64::from(opts.width) * u64::from(opts.height) * ss * ss;
+    let triangles = sizes.triangles();
+    let allowed = std::env::var_os(ALLOW_SLOW_VAR).is_some_and(|v| v == "1");
+    if triangles > SLOW_TRIANGLES && triangles > samples.saturating_mul(TRIANGLES_PER_SAMPLE) && !allowed {
+        bail!(
+            "cannot render: {} has {triangles} triangles for a {}x{} frame ({} per sample): setting them up would \
+             take many minutes on the CPU for a picture that cannot show them; use fewer segments or rings, or \
+             set {ALLOW_SLOW_VAR}=1 to render it anyway",
+            path.display(),
+            opts.width,
+            opts.height,
+            triangles / samples.max(1)
+        );
+    }
+    Ok(())
 }
 
 fn render_cpu(scene: &Scene, opts: &RenderOptions, what: &str, samples: u64) -> Result<RenderOutput> {

@@ -95,7 +95,8 @@ fn displaced_geometry_of_a_large_height_map_is_refused_and_a_small_one_renders()
         dir.path(),
         &[LOW],
         &[
-            "render of 64x36 of displaced geometry needs about",
+            "render of 64x36 of displaced geometry of big.toml (1 object, 8 triangles, the largest map 4096x4096) \
+             needs about",
             "1.0 GiB is available",
             "technique other than displaced",
         ],
@@ -118,10 +119,14 @@ fn ten_finely_divided_spheres_are_refused_with_the_figures() {
         .collect();
     std::fs::write(dir.path().join("s.toml"), scene("builtin:bricks:16x16", &spheres)).unwrap();
     refuses_env(
-        &["render", "s.toml", "--backend", "cpu", "--size", "64x36", "-o", "o.png"],
+        &["render", "s.toml", "--backend", "cpu", "--size", "1280x720", "-o", "o.png"],
         dir.path(),
         &[LOW],
-        &["s.toml", "building the 11 objects' built-in shapes needs about", "1.0 GiB is available", "fewer segments"],
+        &[
+            "render of 1280x720 of s.toml (11 objects, 83968028 triangles, the largest map 16x16) needs about",
+            "1.0 GiB is available",
+            "fewer or coarser meshes",
+        ],
     );
 }
 
@@ -278,16 +283,259 @@ fn a_gpu_frame_over_the_adapters_limits_says_what_to_do() {
 fn cone_and_maxmip_bakes_that_do_not_fit_are_refused_with_the_figure() {
     let dir = tempfile::tempdir().unwrap();
     let tiny = ("POMKIT_MEMORY_LIMIT", "1MiB");
-    // 256x256: the cones need about 2 MiB, the pyramid and its atlas about 0.75 MiB.
+    // 256x256: the cones need several MiB, the pyramid and its atlas about 0.75 MiB and the
+    // generated map 1 MiB: within 2 MiB.
     let args = ["bake", "cone", "builtin:bricks:256x256", "-o", "c.png"];
     refuses_env(
         &args,
         dir.path(),
         &[tiny],
-        &["the cone map of a 256x256 map needs about", "MiB", "smaller height map"],
+        &["the cone map of a 256x256 map (builtin:bricks:256x256) needs about", "MiB", "smaller height map"],
     );
-    let out = pomkit_env(&["bake", "maxmip", "builtin:bricks:256x256", "-o", "m.png"], dir.path(), &[tiny]);
+    let out = pomkit_env(
+        &["bake", "maxmip", "builtin:bricks:256x256", "-o", "m.png"],
+        dir.path(),
+        &[("POMKIT_MEMORY_LIMIT", "2MiB")],
+    );
     assert!(out.status.success(), "the pyramid fits: {}", stderr(&out));
     let args = ["bake", "maxmip", "builtin:bricks:512x512", "-o", "m2.png"];
-    refuses_env(&args, dir.path(), &[tiny], &["maximum-height pyramid of a 512x512 map needs about"]);
+    refuses_env(
+        &args,
+        dir.path(),
+        &[tiny],
+        &["maximum-height pyramid of a 512x512 map (builtin:bricks:512x512) needs about"],
+    );
+}
+
+/// Runs `pomkit ARGS` in `dir` with `env` under an address-space limit of `gib` GiB (`ulimit -v`,
+/// set by a shell that then execs pomkit), as in a container or a batch system; without
+/// `POMKIT_MEMORY_LIMIT` unless `env` sets it.
+#[cfg(unix)]
+fn pomkit_ulimit(gib: u64, args: &[&str], dir: &Path, env: &[(&str, &str)]) -> Output {
+    let mut cmd = Command::new("sh");
+    cmd.arg("-c")
+        .arg(format!("ulimit -v {} && exec \"$0\" \"$@\"", gib << 20))
+        .arg(env!("CARGO_BIN_EXE_pomkit"))
+        .args(args)
+        .current_dir(dir)
+        .env_remove("POMKIT_MEMORY_LIMIT")
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.output().expect("sh runs")
+}
+
+/// Runs `args` under `ulimit -v` of `gib` GiB and asserts a clean refusal: an exit code (not a
+/// signal: the allocator's abort is SIGABRT), no panic, the `needles`, and no file written.
+#[cfg(unix)]
+fn refuses_ulimit(gib: u64, args: &[&str], dir: &Path, env: &[(&str, &str)], needles: &[&str]) -> Output {
+    let before = snapshot(dir);
+    let out = pomkit_ulimit(gib, args, dir, env);
+    assert!(!stderr(&out).contains("memory allocation of"), "{args:?} aborted: {}", stderr(&out));
+    assert_refused(&out, args, dir, &before, needles);
+    out
+}
+
+/// The figure after "needs about " in a refusal, in GiB.
+fn needed_gib(msg: &str) -> f64 {
+    let rest = msg.split("needs about ").nth(1).unwrap_or_else(|| panic!("no figure in {msg:?}"));
+    let mut words = rest.split(' ');
+    let value: f64 = words.next().unwrap().parse().unwrap();
+    match words.next().unwrap().trim_end_matches(';') {
+        "GiB" => value,
+        "MiB" => value / 1024.0,
+        "TiB" => value * 1024.0,
+        unit => panic!("unit {unit} in {msg:?}"),
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn a_cpu_render_over_the_address_space_limit_is_refused_not_aborted() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["render", "--backend", "cpu", "--size", "16384x16384", "--technique", "flat", "-o", "o.png"];
+    let out = refuses_ulimit(4, &args, dir.path(), &[], &["render of 16384x16384 needs about", "ulimit -v"]);
+    // The frame alone (12 bytes a pixel) is 3 GiB: the figure is at least that.
+    assert!(needed_gib(&stderr(&out)) >= 3.0, "{}", stderr(&out));
+}
+
+#[cfg(unix)]
+#[test]
+fn a_gpu_render_over_the_address_space_limit_is_refused_not_aborted() {
+    if let Err(e) = pomkit_gpu::GpuContext::new() {
+        return pomkit_gpu::context::skip_without_gpu(&e);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["render", "--backend", "gpu", "--size", "4096x4096", "--technique", "flat", "-o", "o.png"];
+    refuses_ulimit(3, &args, dir.path(), &[], &["render of 4096x4096 on the GPU needs about", "ulimit -v"]);
+}
+
+#[cfg(unix)]
+#[test]
+fn a_large_built_in_map_on_the_gpu_is_refused_under_the_address_space_limit() {
+    if let Err(e) = pomkit_gpu::GpuContext::new() {
+        return pomkit_gpu::context::skip_without_gpu(&e);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("w.toml"), scene("builtin:waves:16384x16384", "")).unwrap();
+    let args = ["render", "w.toml", "--backend", "gpu", "--size", "64x36", "-o", "o.png"];
+    let out = refuses_ulimit(
+        8,
+        &args,
+        dir.path(),
+        &[],
+        &["the largest map 16384x16384", "on the GPU needs about", "ulimit -v"],
+    );
+    // The textures of a 16384 x 16384 map alone, with their mips, are over 8 GiB on the GPU.
+    assert!(needed_gib(&stderr(&out)) > 8.0, "{}", stderr(&out));
+}
+
+#[test]
+fn a_gpu_render_of_a_large_map_is_refused_in_one_line_with_the_figure() {
+    if let Err(e) = pomkit_gpu::GpuContext::new() {
+        return pomkit_gpu::context::skip_without_gpu(&e);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("b.toml"), scene("builtin:bricks:16384x16384", "")).unwrap();
+    let args = ["render", "b.toml", "--backend", "gpu", "--size", "64x36", "-o", "o.png"];
+    let out = refuses_env(
+        &args,
+        dir.path(),
+        &[LOW],
+        &["on the GPU needs about", "1.0 GiB is available (POMKIT_MEMORY_LIMIT)"],
+    );
+    // One line of error (after the line naming the backend), not the device's report.
+    let msg = stderr(&out);
+    let lines: Vec<&str> = msg.lines().filter(|l| !l.starts_with("backend: ")).collect();
+    assert_eq!(lines.len(), 1, "{msg}");
+    assert!(lines[0].starts_with("error: "), "{msg}");
+    assert!(!msg.contains("Validation"), "{msg}");
+}
+
+#[test]
+fn built_in_maps_and_generate_are_held_to_the_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = ("POMKIT_MEMORY_LIMIT", "16MiB");
+    // 4096 x 4096 values are 64 MiB before anything is baked.
+    refuses_env(
+        &["bake", "normal", "builtin:waves:4096x4096", "-o", "w.png"],
+        dir.path(),
+        &[small],
+        &["builtin:waves:4096x4096", "needs about", "16.0 MiB is available (POMKIT_MEMORY_LIMIT)"],
+    );
+    std::fs::write(dir.path().join("rays.csv"), "u,v,dx,dy,dz\n0.5,0.5,0.0,0.0,-1.0\n").unwrap();
+    refuses_env(
+        &["trace", "--height", "builtin:waves:4096x4096", "--technique", "pom", "--rays", "rays.csv", "-o", "t.csv"],
+        dir.path(),
+        &[small],
+        &["generating builtin:waves:4096x4096 needs about", "16.0 MiB is available"],
+    );
+    refuses_env(
+        &["generate", "waves", "--size", "4096x4096", "-o", "g.png"],
+        dir.path(),
+        &[small],
+        &["generating waves 4096x4096 needs about", "16.0 MiB is available", "--size"],
+    );
+    std::fs::write(dir.path().join("s.toml"), scene("builtin:waves:4096x4096", "")).unwrap();
+    refuses_env(
+        &["render", "s.toml", "--backend", "cpu", "--size", "64x36", "-o", "o.png"],
+        dir.path(),
+        &[small],
+        &["the largest map 4096x4096", "needs about", "16.0 MiB is available"],
+    );
+    // The same budget holds a small job.
+    let out = pomkit_env(&["generate", "waves", "--size", "256x256", "-o", "g.png"], dir.path(), &[small]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+/// Work that would not fit is refused before it starts: under an address-space limit smaller
+/// than the work itself, starting it would end in the allocator, so a clean refusal shows it
+/// never started.
+#[cfg(unix)]
+#[test]
+fn refusals_come_before_the_work() {
+    let dir = tempfile::tempdir().unwrap();
+    // The map alone, 16384 x 16384, is 2 GiB as it is generated.
+    refuses_ulimit(
+        2,
+        &["bake", "cone", "builtin:fur:16384x16384", "-o", "c.png"],
+        dir.path(),
+        &[],
+        &["the cone map of a 16384x16384 map", "needs about", "ulimit -v"],
+    );
+    // Ten spheres of 2048 x 2048 segments: 84 million triangles, 6 GiB as meshes.
+    let spheres: String = (0..10)
+        .map(|i| format!("\n[[object]]\nmesh = \"sphere\"\nrings = 2048\nsegments = 2048\nposition = [{i}.0, 0.0, 0.0]\nmaterial = \"m\"\n"))
+        .collect();
+    std::fs::write(dir.path().join("s.toml"), scene("builtin:bricks:16x16", &spheres)).unwrap();
+    let out = refuses_ulimit(
+        3,
+        &["render", "s.toml", "--backend", "cpu", "--size", "1280x720", "-o", "o.png"],
+        dir.path(),
+        &[],
+        &["render of 1280x720 of s.toml (11 objects, ", "needs about", "ulimit -v", "fewer or coarser meshes"],
+    );
+    assert!(needed_gib(&stderr(&out)) > 20.0, "{}", stderr(&out));
+    // A displaced torus with a 16384 x 16384 map, under a budget of 1 GiB.
+    let torus = scene("builtin:bricks:16384x16384", "").replace("mesh = \"plane\"", "mesh = \"torus\"");
+    std::fs::write(dir.path().join("t.toml"), torus).unwrap();
+    refuses_ulimit(
+        4,
+        &["render", "t.toml", "--technique", "displaced", "--size", "160x90", "-o", "o.png"],
+        dir.path(),
+        &[LOW],
+        &["render of 160x90 of displaced geometry of t.toml", "1.0 GiB is available (POMKIT_MEMORY_LIMIT)"],
+    );
+}
+
+#[test]
+fn a_tiny_or_malformed_memory_limit_is_told_as_such_with_an_input_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = pomkit_env(&["generate", "bricks", "--size", "64x64", "-o", "h.png"], dir.path(), &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let args = ["bake", "normal", "h.png", "-o", "n.png"];
+    let out = refuses_env(
+        &args,
+        dir.path(),
+        &[("POMKIT_MEMORY_LIMIT", "1")],
+        &["h.png", "1 B is available (POMKIT_MEMORY_LIMIT)"],
+    );
+    assert!(!stderr(&out).contains("0x0"), "{}", stderr(&out));
+    let out = refuses_env(
+        &args,
+        dir.path(),
+        &[("POMKIT_MEMORY_LIMIT", "lots")],
+        &["POMKIT_MEMORY_LIMIT=\"lots\" is not a memory size"],
+    );
+    assert!(!stderr(&out).contains("cannot read"), "{}", stderr(&out));
+}
+
+/// A CPU render of far more triangles than samples is refused up front for its time (it ran for
+/// minutes, silently), saying how to let it run; with that, the memory budget still applies.
+#[cfg(unix)]
+#[test]
+fn a_render_of_far_more_triangles_than_pixels_is_refused_for_its_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let spheres: String = (0..10)
+        .map(|i| format!("\n[[object]]\nmesh = \"sphere\"\nrings = 2048\nsegments = 2048\nposition = [{i}.0, 0.0, 0.0]\nmaterial = \"m\"\n"))
+        .collect();
+    std::fs::write(dir.path().join("s.toml"), scene("builtin:bricks:16x16", &spheres)).unwrap();
+    let args = ["render", "s.toml", "--backend", "cpu", "--size", "160x90", "-o", "o.png"];
+    // Under an address-space limit far below the meshes: the refusal comes before they are built.
+    refuses_ulimit(
+        3,
+        &args,
+        dir.path(),
+        &[],
+        &["s.toml has 83968028 triangles for a 160x90 frame (5831 per sample)", "POMKIT_ALLOW_SLOW=1"],
+    );
+    refuses_env(
+        &args,
+        dir.path(),
+        &[LOW, ("POMKIT_ALLOW_SLOW", "1")],
+        &["render of 160x90 of s.toml (11 objects, 83968028 triangles", "1.0 GiB is available"],
+    );
 }

@@ -467,7 +467,8 @@ struct Geometry {
 const BLOCK_BYTES: u64 = 12 + 48 + 24 + 2 * 16;
 
 /// What a render is, for messages: "render of 16384x16384 with AOVs".
-fn describe_job(opts: &RenderOptions) -> String {
+#[must_use]
+pub fn describe_job(opts: &RenderOptions) -> String {
     let mut s = format!("render of {}x{}", opts.width, opts.height);
     if opts.supersample > 1 {
         s += &format!(" with {0}x{0} supersampling", opts.supersample.min(8));
@@ -483,6 +484,12 @@ fn describe_job(opts: &RenderOptions) -> String {
 
 /// What to change when a render does not fit.
 fn advice(scene: &Scene, opts: &RenderOptions) -> String {
+    advice_for(opts, scene.objects.iter().map(|o| o.mesh.triangle_count() as u64).sum::<u64>())
+}
+
+/// What to change when a render with `opts` of a scene of `triangles` does not fit.
+#[must_use]
+pub fn advice_for(opts: &RenderOptions, triangles: u64) -> String {
     let mut ways = vec!["a smaller --size"];
     if opts.supersample > 1 {
         ways.push("a lower --supersample");
@@ -493,7 +500,7 @@ fn advice(scene: &Scene, opts: &RenderOptions) -> String {
     if opts.mode == Mode::Displaced {
         ways.push("smaller height maps or a technique other than displaced");
     }
-    if scene.objects.iter().map(|o| o.mesh.triangle_count() as u64).sum::<u64>() > 1_000_000 {
+    if triangles > 1_000_000 {
         ways.push("fewer or coarser meshes");
     }
     let last = ways.pop().unwrap_or_default();
@@ -516,6 +523,48 @@ const ALBEDO_BYTES_PER_TEXEL: u64 = 16;
 /// prepared materials (surfaces, normal maps, albedo mips).
 #[must_use]
 pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
+    let streamed = scene.objects.iter().any(|o| scene.materials.get(o.material).is_some_and(|m| streams(m, opts)));
+    let materials: Vec<MaterialSize> = scene
+        .materials
+        .iter()
+        .map(|m| MaterialSize {
+            height: m.height.as_ref().map(|f| (f.width(), f.height())),
+            albedo: m.albedo.as_ref().map(|t| (t.width(), t.height())),
+            cone: opts.mode.technique(m.technique) == Technique::Cone,
+        })
+        .collect();
+    estimate_parts(opts, streamed, geometry_counts(scene, opts), &materials)
+}
+
+/// The sizes of a material that its part of [`estimate`] needs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MaterialSize {
+    /// The height map's size.
+    pub height: Option<(u32, u32)>,
+    /// The colour map's size.
+    pub albedo: Option<(u32, u32)>,
+    /// Whether it is drawn with the `cone` technique (its cones are built for the render).
+    pub cone: bool,
+}
+
+/// [`estimate`] before the scene is built, from sizes alone (a scene file's shapes and the
+/// headers of its images): `triangles` of the meshes drawn as they are, `largest` the most
+/// vertices of one object, `displaced_texels` the texels of the height maps of objects drawn
+/// as displaced geometry (streamed in blocks of about two triangles a texel).
+#[must_use]
+pub fn estimate_from_sizes(
+    opts: &RenderOptions,
+    triangles: u64,
+    largest: u64,
+    displaced_texels: u64,
+    materials: &[MaterialSize],
+) -> Estimate {
+    let cells = u64::from(pomkit_core::mesh::BLOCK_CELLS).pow(2);
+    let g = Geometry { triangles, largest, blocks: displaced_texels.saturating_mul(4).div_ceil(cells) };
+    estimate_parts(opts, displaced_texels > 0, g, materials)
+}
+
+fn estimate_parts(opts: &RenderOptions, streamed: bool, g: Geometry, materials: &[MaterialSize]) -> Estimate {
     use pomkit_core::memory::bytes_of;
     let ss = u64::from(opts.supersample.clamp(1, 8));
     let (w, h) = (u64::from(opts.width), u64::from(opts.height));
@@ -530,7 +579,6 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
         threads.saturating_mul(2).saturating_mul(band).min(2 * bytes_of::<Option<Sample>>(w * h * ss * ss)),
     );
     // Each tile being shaded: its samples, and with visibility first its nearest fragments.
-    let streamed = scene.objects.iter().any(|o| scene.materials.get(o.material).is_some_and(|m| streams(m, opts)));
     let tile_w = u64::from(tile_width(opts.width.saturating_mul(opts.supersample.clamp(1, 8)), streamed));
     let tile = tile_w * u64::from(TILE);
     e.add(
@@ -539,7 +587,6 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
             tile * (bytes_of::<Option<Sample>>(1) + bytes_of::<(u32, f32)>(1) + bytes_of::<Fragment>(1)),
         ),
     );
-    let g = geometry_counts(scene, opts);
     let tiles = (w * ss).div_ceil(tile_w) * (h * ss).div_ceil(u64::from(TILE));
     e.add("triangles", bytes_of::<ScreenTriangle>(g.triangles));
     e.add("triangles: tile bins", g.triangles.saturating_mul(16).saturating_add(tiles * 32));
@@ -548,18 +595,18 @@ pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
     let per_vertex = Mesh::bytes_for(1, 0) + bytes_of::<ClipVertex>(1);
     e.add("vertex stage", g.largest.saturating_mul(per_vertex).saturating_add(g.largest.saturating_mul(2 * 12)));
     e.add("displaced blocks", g.blocks.saturating_mul(BLOCK_BYTES));
-    let mut materials = 0u64;
-    for m in &scene.materials {
-        if let Some(f) = &m.height {
-            materials += u64::from(f.width()) * u64::from(f.height()) * HEIGHT_BYTES_PER_TEXEL;
-            if opts.mode.technique(m.technique) == Technique::Cone {
-                materials += pomkit_core::cone::ConeMap::build_bytes(f.width(), f.height());
+    let mut bytes = 0u64;
+    for m in materials {
+        if let Some((fw, fh)) = m.height {
+            bytes = bytes.saturating_add(u64::from(fw) * u64::from(fh) * HEIGHT_BYTES_PER_TEXEL);
+            if m.cone {
+                bytes = bytes.saturating_add(pomkit_core::cone::ConeMap::build_bytes(fw, fh));
             }
         }
-        let albedo = m.albedo.as_ref().map_or(1, |t| u64::from(t.width()) * u64::from(t.height()));
-        materials += albedo * ALBEDO_BYTES_PER_TEXEL;
+        let albedo = m.albedo.map_or(1, |(aw, ah)| u64::from(aw) * u64::from(ah));
+        bytes = bytes.saturating_add(albedo * ALBEDO_BYTES_PER_TEXEL);
     }
-    e.add("materials", materials);
+    e.add("materials", bytes);
     e
 }
 

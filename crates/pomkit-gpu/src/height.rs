@@ -27,7 +27,7 @@ use pomkit_core::bake::NormalFilter;
 use pomkit_core::{EdgeMode, HeightField};
 use wgpu::util::DeviceExt;
 
-use crate::util::{Std140, rgba16f_bytes};
+use crate::util::Std140;
 use crate::{GpuContext, GpuError};
 
 /// Side of the square compute workgroups in `height.wgsl`.
@@ -228,13 +228,25 @@ impl HeightMaps {
                 self.height
             )));
         }
-        let texels: Vec<f32> = depths
-            .iter()
-            .flat_map(|&d| {
-                let d = if d.is_nan() { 1.0 } else { d.clamp(0.0, 1.0) };
-                [d, 0.0, 0.0, 0.0]
-            })
-            .collect();
+        // Fallible: the upload's copies are the largest host allocations of a big height map.
+        let cannot = |e: std::collections::TryReserveError| {
+            GpuError::Unsupported(format!(
+                "uploading a {}x{} height map: cannot allocate its {} upload ({e}): use a smaller height map",
+                self.width,
+                self.height,
+                pomkit_core::memory::format_bytes(expected as u64 * 24)
+            ))
+        };
+        let mut texels: Vec<f32> = Vec::new();
+        texels.try_reserve_exact(expected * 4).map_err(cannot)?;
+        texels.extend(depths.iter().flat_map(|&d| {
+            let d = if d.is_nan() { 1.0 } else { d.clamp(0.0, 1.0) };
+            [d, 0.0, 0.0, 0.0]
+        }));
+        let mut halfs: Vec<u8> = Vec::new();
+        halfs.try_reserve_exact(expected * 8).map_err(cannot)?;
+        halfs.extend(texels.iter().flat_map(|&v| crate::util::f32_to_f16(v).to_le_bytes()));
+        drop(texels);
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.heights,
@@ -242,7 +254,7 @@ impl HeightMaps {
                 origin: wgpu::Origin3d::ZERO,
                 aspect: wgpu::TextureAspect::All,
             },
-            &rgba16f_bytes(&texels),
+            &halfs,
             wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(self.width * 8), rows_per_image: None },
             wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
         );

@@ -6,6 +6,7 @@ use glam::{Mat4, Vec2, Vec3};
 use pomkit_core::bake::NormalFilter;
 use pomkit_core::render::{Mode, RenderError, RenderOptions, RenderOutput, Sample, resolve, validate};
 use pomkit_core::scene::Scene;
+use pomkit_core::trace::Technique;
 
 use crate::material::{
     AOV_FORMATS, FrameUniforms, GpuMaterial, GpuMesh, GpuObject, MaterialPipelines, Targets, Variant,
@@ -135,11 +136,25 @@ impl GpuRenderer {
         let (sw, sh) = (w * ss, h * ss);
         // Before creating anything: the device's limits, then the memory the frame needs.
         check_frame(&self.ctx.device.limits(), w, h, ss)?;
-        let host = frame_host_bytes(w, h, ss, opts.aovs);
+        // The frame and every material's textures (host memory on a software adapter), and the
+        // meshes' buffers, before any is made (docs/LIMITS.md).
+        let mut host = frame_host_bytes(w, h, ss, opts.aovs);
+        for m in &scene.materials {
+            host = host.saturating_add(material_host_bytes(
+                m.height.as_ref().map(|f| (f.width(), f.height())),
+                m.albedo.as_ref().map(|t| (t.width(), t.height())),
+                m.normal_map.as_ref().map(|n| (n.width(), n.height())),
+                opts.mode.technique(m.technique) == Technique::Cone,
+            ));
+        }
+        for obj in &scene.objects {
+            host =
+                host.saturating_add(mesh_host_bytes(obj.mesh.positions.len() as u64, obj.mesh.triangle_count() as u64));
+        }
         pomkit_core::memory::check(
             || format!("render of {w}x{h} on the GPU"),
             host,
-            "use a smaller --size, a lower --supersample, or --backend cpu (which needs less)",
+            "use a smaller --size, a lower --supersample, smaller textures, or --backend cpu",
         )
         .map_err(|e| GpuError::Unsupported(e.to_string()))?;
         let ctx = &self.ctx;
@@ -469,6 +484,52 @@ pub fn frame_host_bytes(w: u32, h: u32, ss: u32, aovs: bool) -> u64 {
     let floats = 3 * 16; // the three targets read back as four floats per sample
     let per_sample = TARGET_BYTES_PER_SAMPLE + readback + floats + std::mem::size_of::<Option<Sample>>() as u64;
     samples.saturating_mul(per_sample) + pomkit_core::render::output_bytes(w, h, aovs) + u64::from(w) * u64::from(h) * 6
+}
+
+/// An upper bound on the host memory a material's textures take on the GPU renderer (all of
+/// it on a software adapter such as lavapipe, where textures live in host memory): for a
+/// `height` map, its mip chain, normals, scratch, cones and maximum-height pyramid (padded to
+/// powers of two) and the upload's copies; with `cone`, the cones built on the CPU; for an
+/// `albedo` map, its mip chain as linear RGB, as floats and as the texture; for a normal map,
+/// its floats and texture.
+#[must_use]
+pub fn material_host_bytes(
+    height: Option<(u32, u32)>,
+    albedo: Option<(u32, u32)>,
+    normal_map: Option<(u32, u32)>,
+    cone: bool,
+) -> u64 {
+    let texels = |(w, h): (u32, u32)| u64::from(w) * u64::from(h);
+    let mut bytes = 0u64;
+    if let Some((w, h)) = height {
+        let n = texels((w, h));
+        let padded = texels((w.next_power_of_two(), h.next_power_of_two()));
+        // Heights with mips (8 bytes, 4/3), normals, scratch (8 each), cones (4); the pyramid
+        // (8 bytes, 4/3, padded); the upload's floats, half floats and staging copy (32).
+        let per = 11 + 8 + 8 + 4 + 32;
+        bytes = bytes.saturating_add(n.saturating_mul(per)).saturating_add(padded.saturating_mul(11));
+        if cone {
+            bytes =
+                bytes.saturating_add(pomkit_core::cone::ConeMap::build_bytes(w, h)).saturating_add(n.saturating_mul(8));
+        }
+    }
+    // Albedo: the chain of linear RGB (12 bytes), its floats (16), half floats and texture (8
+    // each), all with mips (4/3).
+    let a = albedo.map_or(1, texels);
+    bytes = bytes.saturating_add(a.saturating_mul(44 * 4).div_ceil(3));
+    if let Some(size) = normal_map {
+        bytes = bytes.saturating_add(texels(size).saturating_mul(16 + 8 + 8));
+    }
+    bytes
+}
+
+/// An upper bound on the host memory of a mesh of `vertices` and `triangles` on the GPU
+/// renderer: the world-space copy, the vertex and index bytes and the buffers.
+#[must_use]
+pub fn mesh_host_bytes(vertices: u64, triangles: u64) -> u64 {
+    pomkit_core::mesh::Mesh::bytes_for(vertices, triangles)
+        .saturating_add(vertices.saturating_mul(VERTEX_BYTES * 3))
+        .saturating_add(triangles.saturating_mul(12 * 3))
 }
 
 /// A scene uploaded to the GPU ([`GpuRenderer::prepare`]), drawn by [`GpuRenderer::draw`].

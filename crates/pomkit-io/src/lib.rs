@@ -271,14 +271,23 @@ pub enum IoError {
         /// What is wrong.
         reason: &'static str,
     },
-    /// The memory budget could not be read (a malformed `POMKIT_MEMORY_LIMIT`).
-    #[error("cannot read {}: {reason}", crate::shown(path))]
+    /// The memory budget could not be read (a malformed `POMKIT_MEMORY_LIMIT`: the message is
+    /// the variable's, not the file's), or reading the file does not fit in it.
+    #[error("{}", memory_message(path, reason))]
     Memory {
         /// The file.
         path: PathBuf,
         /// The reason.
         reason: pomkit_core::memory::MemoryError,
     },
+}
+
+/// [`IoError::Memory`]'s message: a malformed budget is not the file's fault.
+fn memory_message(path: &Path, reason: &pomkit_core::memory::MemoryError) -> String {
+    match reason {
+        pomkit_core::memory::MemoryError::BadLimit { .. } => reason.to_string(),
+        _ => format!("cannot read {}: {reason}", crate::shown(path)),
+    }
 }
 
 /// Reads a cone map baked by `pomkit bake cone` (a 16-bit grey + alpha PNG: grey the footprint's

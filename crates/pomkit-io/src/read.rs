@@ -139,6 +139,10 @@ fn check_signature(head: &[u8], path: &Path) -> Result<(), IoError> {
     Err(IoError::NotAnImage { path: path.to_owned(), start })
 }
 
+/// What an image decoder may allocate for a header (its tables and metadata) whatever the
+/// budget.
+const HEADER_BYTES: u64 = 16 << 20;
+
 /// Decodes an image held to [`MAX_SIZE`] texels a side and to the memory budget
 /// ([`pomkit_core::memory`]): `extra_per_pixel` bytes per pixel that the caller allocates
 /// after decoding (a height field's floats, say) count toward it. The dimensions are read from
@@ -157,8 +161,10 @@ pub fn decode_image_limited(bytes: &[u8], path: &Path, extra_per_pixel: u64) -> 
         .map_err(|reason| IoError::Read { path: path.to_owned(), reason })?;
     // The decoder's own bookkeeping is held to the budget; the dimensions are checked below,
     // with the figures in the message.
+    // (At least HEADER_BYTES: a tiny budget is reported below with the image's size and the
+    // figures, not as a header the decoder could not allocate.)
     let mut construction = image::Limits::default();
-    construction.max_alloc = budget.map(|b| b.bytes);
+    construction.max_alloc = budget.map(|b| b.bytes.max(HEADER_BYTES));
     reader.limits(construction);
     let decode_err = |reason| map_decode_error(reason, path, None);
     let mut decoder = reader.into_decoder().map_err(decode_err)?;
@@ -247,11 +253,14 @@ fn map_decode_error(reason: image::ImageError, path: &Path, size: Option<(u32, u
             };
             IoError::ImageTooLarge { path: path.to_owned(), width, height, reason: why }
         }
-        (image::ImageError::Limits(_), None) => IoError::ImageTooLarge {
+        (image::ImageError::Limits(_), None) => IoError::Memory {
             path: path.to_owned(),
-            width: 0,
-            height: 0,
-            reason: "its header alone needs more memory than is available".to_owned(),
+            reason: memory::MemoryError::Allocation {
+                what: "its header".to_owned(),
+                bytes: HEADER_BYTES,
+                reason: "the decoder's limit".to_owned(),
+                advice: format!("set {} higher", memory::LIMIT_VAR),
+            },
         },
         _ => IoError::Decode { path: path.to_owned(), reason },
     }

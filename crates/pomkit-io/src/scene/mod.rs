@@ -192,10 +192,12 @@ use crate::mesh::{MeshLoadError, load_mesh};
 mod maps;
 mod material;
 mod object;
+mod sizes;
 
 use crate::{Channel, HeightLoadOptions, IoError, load_height_field};
 pub use maps::{NORMAL_Z_TOLERANCE, decode_normal_map, load_color_texture, load_normal_map};
 use object::{is_shape, shape_bytes};
+pub use sizes::{MaterialSizes, ObjectSizes, SceneSizes, scene_sizes, texture_size};
 
 /// The side of a built-in texture when the scene gives no size.
 pub const BUILTIN_SIZE: u32 = 512;
@@ -678,6 +680,8 @@ impl Loader<'_> {
         let ambient = self.color("scene", "ambient", f.ambient.unwrap_or([0.05, 0.05, 0.06]))?;
         let camera = self.camera(&f.camera)?;
         let lights = f.light.iter().enumerate().map(|(i, l)| self.light(i, l)).collect::<Result<Vec<_>, _>>()?;
+        // The maps, checked against the memory budget before any is generated or decoded.
+        self.check_textures(&f)?;
         let mut materials: Vec<Material> = Vec::with_capacity(f.material.len());
         for (i, m) in f.material.iter().enumerate() {
             let material = self.material(i, m)?;

@@ -190,6 +190,12 @@ impl Loader<'_> {
 /// clamped as the loader will, plus poles and caps) twice over, for the buffers growing while it
 /// is built and the tangent computation.
 pub(super) fn shape_bytes(o: &ObjectFile) -> u64 {
+    shape_counts(o).map_or(0, |(verts, tris)| Mesh::bytes_for(verts, tris).saturating_mul(2))
+}
+
+/// Upper bounds on the vertices and triangles of an object's built-in shape (a grid of its
+/// segment counts, clamped as the loader will, plus poles and caps); `None` for a mesh file.
+pub(super) fn shape_counts(o: &ObjectFile) -> Option<(u64, u64)> {
     let count = |v: Option<u32>, default: u32| u64::from(v.unwrap_or(default).clamp(1, MAX_SEGMENTS));
     let (a, b) = match o.mesh.trim().to_ascii_lowercase().as_str() {
         "plane" => (count(o.segments, 1), count(o.segments, 1)),
@@ -198,9 +204,9 @@ pub(super) fn shape_bytes(o: &ObjectFile) -> u64 {
         "cylinder" => (3, count(o.segments, 64)),
         "torus" => (count(o.segments, 64), count(o.tube_segments, 32)),
         "quad" | "cube" => (6, 1),
-        _ => return 0,
+        _ => return None,
     };
-    Mesh::bytes_for((a + 3) * (b + 3), 2 * (a + 1) * (b + 1)).saturating_mul(2)
+    Some(((a + 3) * (b + 3), 2 * (a + 1) * (b + 1)))
 }
 
 /// Whether `name` (lowercase) is a built-in shape.
