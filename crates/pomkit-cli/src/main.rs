@@ -6,13 +6,14 @@ mod bake;
 mod batch;
 mod bench;
 mod compare;
+mod interrupt;
 mod output;
 mod progress;
 mod render;
 mod technique;
 mod trace;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
@@ -160,7 +161,7 @@ impl From<ChannelArg> for Channel {
 impl HeightOption {
     /// Loads the height field this option names.
     pub(crate) fn load(&self) -> Result<HeightField> {
-        load_height(&self.input, &self.read)
+        load_height(Path::new(&self.input), &self.read)
     }
 
     /// The files this option reads (for the output checks: no output may be one of them).
@@ -202,8 +203,9 @@ impl HeightOption {
 }
 
 /// Loads the height field `input` names (a file or `builtin:NAME[:WxH]`), read as `read` says.
-pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField> {
-    if let Some(spec) = input.strip_prefix("builtin:") {
+pub(crate) fn load_height(input: &Path, read: &HeightRead) -> Result<HeightField> {
+    if let Some(spec) = input.to_str().and_then(|s| s.strip_prefix("builtin:")) {
+        let input = input.display();
         // As scene files do (docs/SCENES.md): these flags say how to read an image's values, and
         // a built-in map has none to read. (--depth-map inverts it, as documented.)
         if read.channel != ChannelArg::Luma {
@@ -227,7 +229,7 @@ pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField>
         });
     }
     let opts = HeightLoadOptions { depth_map: read.depth_map, channel: read.channel.into(), normalize: read.normalize };
-    Ok(pomkit_io::load_height_field(&PathBuf::from(input), &opts)?)
+    Ok(pomkit_io::load_height_field(input, &opts)?)
 }
 
 /// Parses `WxH` with both sides in 1..=[`pomkit_core::MAX_SIZE`] (16384).
@@ -343,6 +345,8 @@ fn private_runtime_dir() -> Option<PathBuf> {
 fn main() -> ExitCode {
     ensure_runtime_dir();
     let cli = Cli::parse();
+    // Ctrl-C and SIGTERM remove staged outputs and exit 130 or 143 (docs/LIMITS.md, "Outputs").
+    interrupt::install();
     // The CPU renderer's SIMD level (POMKIT_SIMD): a value it does not know is bad input.
     if let Err(e) = pomkit_cpu::Simd8::from_env() {
         eprintln!("error: {e}");
