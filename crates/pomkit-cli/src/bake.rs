@@ -40,7 +40,7 @@ pub struct BakeInputs {
     /// tif and exr files) and quoted globs bake a whole library: OUT is then a folder (see
     /// --name, --recursive).
     #[arg(value_name = "IN", required = true, num_args = 1..)]
-    pub(crate) inputs: Vec<String>,
+    pub(crate) inputs: Vec<PathBuf>,
     #[command(flatten)]
     pub(crate) read: HeightRead,
     #[command(flatten)]
@@ -317,7 +317,7 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
 /// flag or output fails fast. The output is staged in the returned [`Outputs`] (which refuses
 /// to overwrite the input) and appears only when the caller commits it.
 fn prepare(
-    input: &str,
+    input: &Path,
     read: &HeightRead,
     opts: &NormalBakeOptions,
     output: &Path,
@@ -333,19 +333,19 @@ fn prepare(
         );
     }
     let mut outs = Outputs::new();
-    if !input.starts_with("builtin:") {
+    if !input.to_str().is_some_and(|s| s.starts_with("builtin:")) {
         outs.input(input);
     }
     let id = outs.output(output);
     outs.check()?;
     let field = crate::load_height(input, read)?;
-    opts.validate(&field).with_context(|| format!("cannot bake {input}"))?;
+    opts.validate(&field).with_context(|| format!("cannot bake {}", input.display()))?;
     Ok((field, outs, id))
 }
 
 /// Bakes `job` from the height map `input` into `output`, atomically; `bars` shows progress
 /// bars for big maps (single mode; a batch shows its own). Returns the map's size.
-pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Result<(u32, u32)> {
+pub(crate) fn bake_file(job: &Job, input: &Path, output: &Path, bars: bool) -> Result<(u32, u32)> {
     let opts = job.slope.options(job.y_down);
     let layout = job.kind.layout();
     let (field, mut outs, id) = prepare(input, &job.read, &opts, output, layout)?;
