@@ -199,22 +199,23 @@ pub(crate) fn run(job: &Job, inputs: &[PathBuf], args: &BatchArgs, out: &Path) -
     // A file that is the output of another file of this batch (a folder baked into itself, an
     // earlier run's outputs) is not an input.
     let plans = plan(&items);
-    let own: HashSet<FileKey> = plans.iter().filter_map(|(o, _)| regular_file_key(o)).collect();
-    let keys: Vec<Option<FileKey>> = items.iter().map(|i| regular_file_key(&i.input)).collect();
-    let is_own = |i: usize| {
-        keys[i].as_ref().is_some_and(|k| {
-            own.contains(k)
-                && plans.iter().enumerate().any(|(j, (o, _))| j != i && regular_file_key(o).as_ref() == Some(k))
-        })
-    };
-    let own_count = (0..items.len()).filter(|&i| is_own(i)).count();
-    if own_count > 0 {
-        let mut i = 0;
-        items.retain(|_| {
-            i += 1;
-            !is_own(i - 1)
-        });
+    // Which files each existing output is: the output of which files (by index).
+    let mut own: HashMap<FileKey, Vec<usize>> = HashMap::new();
+    for (j, (o, _)) in plans.iter().enumerate() {
+        if let Some(k) = regular_file_key(o) {
+            own.entry(k).or_default().push(j);
+        }
     }
+    let is_own: Vec<bool> = items
+        .iter()
+        .enumerate()
+        .map(|(i, item)| {
+            regular_file_key(&item.input).and_then(|k| own.get(&k)).is_some_and(|of| of.iter().any(|&j| j != i))
+        })
+        .collect();
+    let own_count = is_own.iter().filter(|&&o| o).count();
+    let mut flags = is_own.into_iter();
+    items.retain(|_| !flags.next().unwrap_or(false));
     if items.is_empty() {
         let names: Vec<String> = inputs.iter().map(|p| p.display().to_string()).collect();
         bail!("no height maps found in {} (folders contribute their {} files)", names.join(", "), extensions());
