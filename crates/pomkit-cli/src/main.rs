@@ -207,7 +207,10 @@ pub(crate) fn load_height(input: &Path, read: &HeightRead) -> Result<HeightField
     if let Some(spec) = input.to_str().and_then(|s| s.strip_prefix("builtin:")) {
         let input = input.display();
         // As scene files do (docs/SCENES.md): these flags say how to read an image's values, and
-        // a built-in map has none to read. (--depth-map inverts it, as documented.)
+        // a built-in map has none to read (a negative --scale inverts a baked relief).
+        if read.depth_map {
+            bail!("--depth-map describes how to read a height image: it does not apply to {input}");
+        }
         if read.channel != ChannelArg::Luma {
             let channel = Channel::from(read.channel);
             bail!("--channel {channel} describes how to read a height image: it does not apply to {input}");
@@ -218,15 +221,9 @@ pub(crate) fn load_height(input: &Path, read: &HeightRead) -> Result<HeightField
         let (name, size) = spec.split_once(':').unwrap_or((spec, "512x512"));
         let pattern: Pattern = name.parse().with_context(|| format!("input {input}"))?;
         let (w, h) = parse_size(size).with_context(|| format!("input {input}"))?;
-        let field = progress::rows(h, w, &format!("generating {name} {w}x{h}"), |tick| {
+        return Ok(progress::rows(h, w, &format!("generating {name} {w}x{h}"), |tick| {
             procedural::generate_with_progress(pattern, w, h, tick)
-        });
-        return Ok(if read.depth_map {
-            // The builtin is a height map; read as depth it is inverted, as a file would be.
-            HeightField::from_depths(w, h, field.heights()).context("inverting builtin")?
-        } else {
-            field
-        });
+        }));
     }
     let opts = HeightLoadOptions { depth_map: read.depth_map, channel: read.channel.into(), normalize: read.normalize };
     Ok(pomkit_io::load_height_field(input, &opts)?)

@@ -66,6 +66,15 @@ pub struct TraceArgs {
 
 pub fn run(a: &TraceArgs) -> Result<()> {
     let params = a.options.params()?;
+    if let Some(path) = &a.height.cone_map
+        && a.technique != Technique::Cone
+    {
+        eprintln!(
+            "warning: --cone-map {}: only the cone technique uses a cone map, not {}",
+            path.display(),
+            a.technique
+        );
+    }
     // Every output is checked before any work, and never one of the inputs.
     let mut outs = Outputs::new();
     outs.input(&a.rays);

@@ -382,6 +382,10 @@ impl Outputs {
 /// be) a regular file.
 fn examine(path: &Path) -> Result<(Dest, Option<Identity>), IoError> {
     if is_std_stream(path) {
+        if stdout_was_closed() {
+            let reason = std::io::Error::other("standard output is closed (nothing would be written)");
+            return Err(OutputError::Unusable { path: path.to_owned(), reason }.into());
+        }
         return Ok((Dest::Stdout, None));
     }
     let unusable = |reason| OutputError::Unusable { path: path.to_owned(), reason };
@@ -434,6 +438,29 @@ fn examine(path: &Path) -> Result<(Dest, Option<Identity>), IoError> {
     };
     let tmp = stage_in(&folder, Some(&meta)).map_err(unusable)?;
     Ok((Dest::Replace { tmp, target }, Some(Identity::Existing(key))))
+}
+
+/// Whether the program was started with its standard output closed (`>&-`). Rust's runtime
+/// then opens `/dev/null` in its place, read-write, so that every write would vanish without an
+/// error; a redirection to `/dev/null` opens it write-only, and is a choice. Linux only (it
+/// reads `/proc/self/fdinfo/1`); `false` elsewhere.
+fn stdout_was_closed() -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::fs::{FileTypeExt, MetadataExt};
+        let Ok(info) = std::fs::read_to_string("/proc/self/fdinfo/1") else { return false };
+        let flags =
+            info.lines().find_map(|l| l.strip_prefix("flags:")).and_then(|f| u32::from_str_radix(f.trim(), 8).ok());
+        // O_ACCMODE: 2 is O_RDWR.
+        let read_write = flags.is_some_and(|f| f & 3 == 2);
+        let is_null = match (std::fs::metadata("/proc/self/fd/1"), std::fs::metadata("/dev/null")) {
+            (Ok(out), Ok(null)) => out.file_type().is_char_device() && out.rdev() == null.rdev(),
+            _ => false,
+        };
+        read_write && is_null
+    }
+    #[cfg(not(target_os = "linux"))]
+    false
 }
 
 /// Read-only by its permission bits (not by trying: root can write anything).
