@@ -2,10 +2,11 @@
 //! and exits with 128 + the signal's number (130 for SIGINT, 143 for SIGTERM), as a shell does
 //! (docs/LIMITS.md, "Outputs").
 //!
-//! A thread waits for the signals. When one comes it removes every staged file of the process
-//! ([`pomkit_io::output::remove_staged_files`], which waits for a commit in progress, so a run's
-//! outputs appear all together or not at all), runs the hook the running verb left with
-//! [`on_interrupt`] (a batch prints its summary and writes its report), and exits.
+//! A thread waits for the signals. When one comes, another thread removes every staged file of
+//! the process ([`pomkit_io::output::remove_staged_files`], which waits for a commit in
+//! progress, so a run's outputs appear all together or not at all), runs the hook the running
+//! verb left with [`on_interrupt`] (a batch prints its summary and writes its report), and
+//! exits; a second signal meanwhile exits at once.
 
 use std::sync::{Mutex, PoisonError};
 
@@ -40,9 +41,19 @@ pub(crate) fn install() {
     // The handlers are registered by the thread itself: if it cannot start, nothing is caught.
     let _ = std::thread::Builder::new().name("signals".into()).spawn(|| {
         let Ok(mut signals) = Signals::new([SIGINT, SIGTERM]) else { return };
-        if let Some(signal) = signals.forever().next() {
+        let mut stopping = false;
+        for signal in signals.forever() {
+            if stopping {
+                // A second Ctrl-C while the first is handled: stop now.
+                std::process::exit(128 + signal);
+            }
+            stopping = true;
             let name = if signal == SIGINT { "SIGINT" } else { "SIGTERM" };
-            stop(name, 128 + signal);
+            let handled =
+                std::thread::Builder::new().name("interrupted".into()).spawn(move || stop(name, 128 + signal));
+            if handled.is_err() {
+                std::process::exit(128 + signal);
+            }
         }
     });
 }
