@@ -41,7 +41,7 @@ pub struct BakeInputs {
     /// --name, --recursive). A FIFO (named pipe) is read once a program writes to it: pomkit
     /// waits 10 s for one to open it, then gives up.
     #[arg(value_name = "IN", required = true, num_args = 1..)]
-    pub(crate) inputs: Vec<String>,
+    pub(crate) inputs: Vec<PathBuf>,
     #[command(flatten)]
     pub(crate) read: HeightRead,
     #[command(flatten)]
@@ -337,7 +337,7 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
 /// flag or output fails fast. The output is staged in the returned [`Outputs`] (which refuses
 /// to overwrite the input) and appears only when the caller commits it.
 fn prepare(
-    input: &str,
+    input: &Path,
     read: &HeightRead,
     opts: &NormalBakeOptions,
     output: &Path,
@@ -354,7 +354,7 @@ fn prepare(
         );
     }
     let mut outs = Outputs::new();
-    if !input.starts_with("builtin:") {
+    if !input.to_str().is_some_and(|s| s.starts_with("builtin:")) {
         outs.input(input);
     }
     let id = outs.output(output);
@@ -362,30 +362,33 @@ fn prepare(
     // The whole bake against the memory budget before a built-in map is generated; an image
     // file's reading is checked from its header before it is decoded, and the bake once it is
     // read (docs/LIMITS.md).
-    let builtin = input.starts_with("builtin:");
-    if builtin && let Some((w, h)) = pomkit_io::scene::texture_size(Path::new("."), input) {
+    let builtin = input.to_str().filter(|s| s.starts_with("builtin:"));
+    let shown = input.display();
+    if let Some(spec) = builtin
+        && let Some((w, h)) = pomkit_io::scene::texture_size(Path::new("."), spec)
+    {
         let (what, bytes) = kind.job(w, h);
         pomkit_core::memory::check(
-            || format!("baking {what} ({input})"),
-            bytes.saturating_add(crate::height_load_bytes(input, w, h)),
+            || format!("baking {what} ({shown})"),
+            bytes.saturating_add(crate::height_load_bytes(true, w, h)),
             "bake a smaller height map",
         )?;
     }
     let field = crate::load_height(input, read)?;
-    if !builtin {
+    if builtin.is_none() {
         let (what, bytes) = kind.job(field.width(), field.height());
-        pomkit_core::memory::check(|| format!("baking {what} ({input})"), bytes, "bake a smaller height map")?;
+        pomkit_core::memory::check(|| format!("baking {what} ({shown})"), bytes, "bake a smaller height map")?;
     }
-    opts.validate(&field).with_context(|| format!("cannot bake {input}"))?;
+    opts.validate(&field).with_context(|| format!("cannot bake {shown}"))?;
     Ok((field, outs, id))
 }
 
 /// The output's `n` texels, allocated fallibly: an estimate that was too low ends in an error
 /// naming the input, not in the allocator's abort (docs/LIMITS.md).
-fn output_buffer<T: Clone>(value: T, n: usize, input: &str) -> Result<Vec<T>> {
+fn output_buffer<T: Clone>(value: T, n: usize, input: &Path) -> Result<Vec<T>> {
     pomkit_core::memory::try_vec(value, n).map_err(|e| {
         anyhow::Error::from(pomkit_core::memory::MemoryError::Allocation {
-            what: format!("the baked map of {input}"),
+            what: format!("the baked map of {}", input.display()),
             bytes: pomkit_core::memory::bytes_of::<T>(n as u64),
             reason: e.to_string(),
             advice: "bake a smaller height map".to_owned(),
@@ -395,7 +398,7 @@ fn output_buffer<T: Clone>(value: T, n: usize, input: &str) -> Result<Vec<T>> {
 
 /// Bakes `job` from the height map `input` into `output`, atomically; `bars` shows progress
 /// bars for big maps (single mode; a batch shows its own). Returns the map's size.
-pub(crate) fn bake_file(job: &Job, input: &str, output: &Path, bars: bool) -> Result<(u32, u32)> {
+pub(crate) fn bake_file(job: &Job, input: &Path, output: &Path, bars: bool) -> Result<(u32, u32)> {
     let opts = job.slope.options(job.y_down);
     let layout = job.kind.layout();
     let (field, mut outs, id) = prepare(input, &job.read, &opts, output, job.kind)?;

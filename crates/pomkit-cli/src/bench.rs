@@ -4,7 +4,6 @@
 //! fetches that explain them).
 
 use std::io::Write;
-use std::path::Path;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
@@ -16,7 +15,7 @@ use pomkit_cpu::{CpuRenderer, Mode, RenderOptions, RenderOutput};
 use pomkit_gpu::GpuRenderer;
 
 use crate::backend::{self, Backend, Opened};
-use crate::{output, progress, technique};
+use crate::{progress, technique};
 
 /// The CSV header of the table: the CPU renderer's columns, then the GPU renderer's.
 pub const CSV_HEADER: &str = "technique,width,height,runs,median_ms,mpix_per_s,fetches_per_pixel,\
@@ -197,6 +196,10 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     let gpu_runs = check_runs("--gpu-runs", a.gpu_runs.or(a.runs).unwrap_or(DEFAULT_GPU_RUNS), 1)?;
     let cpu_runs = check_runs("--cpu-runs", a.cpu_runs.or(a.runs).unwrap_or(DEFAULT_CPU_RUNS), 0)?;
     let modes = parse_techniques(&a.techniques)?;
+    // Standard output is checked before any timing (a closed one is refused now, not after).
+    let mut outs = pomkit_io::output::Outputs::new();
+    let table = outs.output("-");
+    outs.check()?;
     if cpu_runs == 0 && a.backend == Backend::Cpu {
         bail!("--cpu-runs 0 with --backend cpu leaves nothing to time");
     }
@@ -233,10 +236,15 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         rows.push(Row { name: "displaced".into(), cpu: Some(cpu), gpu: None });
     }
     let caption = caption(a, w, h, gpu.as_deref(), gpu_runs, cpu_runs, skipped.as_deref(), &rows);
-    output::write_text(Path::new("-"), |wr| match a.format {
-        Format::Md => write_md(wr, &caption, &rows, w, h),
-        Format::Csv => write_csv(wr, &rows, w, h),
-    })
+    outs.write_with(table, |wr| {
+        match a.format {
+            Format::Md => write_md(wr, &caption, &rows, w, h),
+            Format::Csv => write_csv(wr, &rows, w, h),
+        }
+        .map_err(anyhow::Error::from)
+    })?;
+    outs.commit()?;
+    Ok(())
 }
 
 /// What the Markdown table shows, for quoting.

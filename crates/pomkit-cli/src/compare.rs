@@ -72,6 +72,14 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     let params = a.options.params()?;
     let angles = parse_angles(&a.angles)?;
     let techniques = technique::parse_list(&a.techniques)?;
+    if let Some(path) = &a.height.cone_map
+        && !techniques.contains(&pomkit_core::trace::Technique::Cone)
+    {
+        eprintln!(
+            "warning: --cone-map {}: only the cone technique uses a cone map, and --techniques has no cone",
+            path.display()
+        );
+    }
     if !(1..=MAX_RAYS).contains(&a.rays) {
         bail!("--rays {}: give between 1 and {MAX_RAYS} rays per angle", a.rays);
     }

@@ -6,13 +6,14 @@ mod bake;
 mod batch;
 mod bench;
 mod compare;
+mod interrupt;
 mod output;
 mod progress;
 mod render;
 mod technique;
 mod trace;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
@@ -160,7 +161,7 @@ impl From<ChannelArg> for Channel {
 impl HeightOption {
     /// Loads the height field this option names.
     pub(crate) fn load(&self) -> Result<HeightField> {
-        load_height(&self.input, &self.read)
+        load_height(Path::new(&self.input), &self.read)
     }
 
     /// The files this option reads (for the output checks: no output may be one of them).
@@ -202,10 +203,14 @@ impl HeightOption {
 }
 
 /// Loads the height field `input` names (a file or `builtin:NAME[:WxH]`), read as `read` says.
-pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField> {
-    if let Some(spec) = input.strip_prefix("builtin:") {
+pub(crate) fn load_height(input: &Path, read: &HeightRead) -> Result<HeightField> {
+    if let Some(spec) = input.to_str().and_then(|s| s.strip_prefix("builtin:")) {
+        let input = input.display();
         // As scene files do (docs/SCENES.md): these flags say how to read an image's values, and
-        // a built-in map has none to read. (--depth-map inverts it, as documented.)
+        // a built-in map has none to read (a negative --scale inverts a baked relief).
+        if read.depth_map {
+            bail!("--depth-map describes how to read a height image: it does not apply to {input}");
+        }
         if read.channel != ChannelArg::Luma {
             let channel = Channel::from(read.channel);
             bail!("--channel {channel} describes how to read a height image: it does not apply to {input}");
@@ -218,29 +223,23 @@ pub(crate) fn load_height(input: &str, read: &HeightRead) -> Result<HeightField>
         let (w, h) = parse_size(size).with_context(|| format!("input {input}"))?;
         pomkit_core::memory::check(
             || format!("generating {input}"),
-            height_load_bytes(input, w, h),
+            height_load_bytes(true, w, h),
             "use a smaller size (builtin:NAME:WxH)",
         )?;
-        let field = progress::rows(h, w, &format!("generating {name} {w}x{h}"), |tick| {
+        return Ok(progress::rows(h, w, &format!("generating {name} {w}x{h}"), |tick| {
             procedural::generate_with_progress(pattern, w, h, tick)
-        });
-        return Ok(if read.depth_map {
-            // The builtin is a height map; read as depth it is inverted, as a file would be.
-            HeightField::from_depths(w, h, field.heights()).context("inverting builtin")?
-        } else {
-            field
-        });
+        }));
     }
     let opts = HeightLoadOptions { depth_map: read.depth_map, channel: read.channel.into(), normalize: read.normalize };
-    Ok(pomkit_io::load_height_field(&PathBuf::from(input), &opts)?)
+    Ok(pomkit_io::load_height_field(input, &opts)?)
 }
 
-/// The bytes loading the height map `input` of `w` x `h` takes: a built-in's values and its
-/// field, and their copies when `--depth-map` inverts it (16 bytes a texel), or a file's field
-/// (its decoded pixels are checked as it is read).
-pub(crate) fn height_load_bytes(input: &str, w: u32, h: u32) -> u64 {
+/// The bytes loading a height map of `w` x `h` takes: a built-in's (`builtin`) values as it is
+/// generated and its field (16 bytes a texel, with room for the generator's own copy), or a
+/// file's field (its decoded pixels are checked as it is read).
+pub(crate) fn height_load_bytes(builtin: bool, w: u32, h: u32) -> u64 {
     let n = u64::from(w) * u64::from(h);
-    if input.starts_with("builtin:") { n * 16 } else { n * 4 }
+    if builtin { n * 16 } else { n * 4 }
 }
 
 /// Parses `WxH` with both sides in 1..=[`pomkit_core::MAX_SIZE`] (16384).
@@ -336,6 +335,8 @@ fn main() -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
+    // Ctrl-C and SIGTERM remove staged outputs and exit 130 or 143 (docs/LIMITS.md, "Outputs").
+    interrupt::install();
     // The CPU renderer's SIMD level (POMKIT_SIMD): a value it does not know is bad input.
     if let Err(e) = pomkit_cpu::Simd8::from_env() {
         eprintln!("error: {e}");

@@ -96,6 +96,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     };
     let modes: Vec<(String, Mode)> =
         a.compare.iter().map(|n| Ok((n.to_ascii_lowercase(), parse_mode(n, "--compare")?))).collect::<Result<_>>()?;
+    if !modes.is_empty() && !a.aov.is_empty() {
+        bail!(
+            "--aov does not apply to --compare: the side-by-side sheet has no AOVs; render one technique \
+             (--technique T) with --aov"
+        );
+    }
     pomkit_io::check_output(&a.output, PixelLayout::Rgb8)?;
     // Every output (the PNG and its AOVs) is checked before any work, may not be a file the
     // scene reads, and appears only when the whole run succeeds.
@@ -145,6 +151,17 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         None => pomkit_core::demo::demo_scene(),
     };
+    // A baked cone map that no technique of this render steps on is harmless, but likely not
+    // what was meant.
+    for m in scene.materials.iter().filter(|m| m.cones.is_some()) {
+        if !all_modes.iter().any(|mode| mode.technique(m.technique) == Technique::Cone) {
+            eprintln!(
+                "warning: material {:?}: its cone_map is used by the cone technique only, and this render draws it with {}",
+                m.name,
+                all_modes[0].technique(m.technique)
+            );
+        }
+    }
     let _cones = build_cones(&scene, &all_modes);
     if modes.is_empty() {
         let out = renderer.render(&scene, &base, "rendering")?;

@@ -1,7 +1,6 @@
 //! `pomkit trace`: rays from a CSV file traced with one technique; hits to a CSV file
 //! (ARCHITECTURE.md, Stable interfaces).
 
-use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 
@@ -66,6 +65,15 @@ pub struct TraceArgs {
 
 pub fn run(a: &TraceArgs) -> Result<()> {
     let params = a.options.params()?;
+    if let Some(path) = &a.height.cone_map
+        && a.technique != Technique::Cone
+    {
+        eprintln!(
+            "warning: --cone-map {}: only the cone technique uses a cone map, not {}",
+            path.display(),
+            a.technique
+        );
+    }
     // Every output is checked before any work, and never one of the inputs.
     let mut outs = Outputs::new();
     outs.input(&a.rays);

@@ -669,7 +669,7 @@ fn config_rules_match_names_and_folders_and_override_the_command_line() {
 }
 
 #[test]
-fn config_options_a_verb_does_not_use_are_ignored_and_encoding_is_checked_per_verb() {
+fn config_options_a_verb_does_not_use_are_ignored_and_encodings_apply_to_their_verb() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::create_dir(d.join("lib")).unwrap();
@@ -683,8 +683,9 @@ fn config_options_a_verb_does_not_use_are_ignored_and_encoding_is_checked_per_ve
     same_as(&d.join("out/a_packed.png"), &single(d, "pack", "lib/a.png", &[], "png"), "pack ignores encoding");
     ok(&["bake", "normal", "lib", "-o", "out", "--config", "rg.toml"], d);
     same_as(&d.join("out/a_normal.png"), &single(d, "normal", "lib/a.png", &["--encoding", "rg8"], "png"), "rg8");
-    // rg8 is not a parallax encoding.
-    refuses(&["bake", "parallax", "lib", "-o", "out2", "--config", "rg.toml"], d, &["rg.toml", "encoding"]);
+    // One config serves every verb: rg8 is not a parallax encoding, and parallax ignores it.
+    ok(&["bake", "parallax", "lib", "-o", "out2", "--config", "rg.toml"], d);
+    same_as(&d.join("out2/a_parallax.png"), &single(d, "parallax", "lib/a.png", &[], "png"), "parallax ignores rg8");
 }
 
 #[test]
@@ -699,7 +700,7 @@ fn a_bad_config_fails_before_any_work_naming_the_file_the_rule_and_the_key() {
         ("unknown.toml", "folder = \"x\"\nsharpen = 2\n", "sharpen"),
         ("wrongtype.toml", "scale = \"big\"\n", "scale"),
         ("badvalue.toml", "filter = \"gauss\"\n", "filter"),
-        ("badencoding.toml", "encoding = \"r8\"\n", "encoding"),
+        ("badencoding.toml", "encoding = \"rgb16\"\n", "encoding"),
         ("badglob.toml", "match = \"[abc\"\n", "match"),
         ("badchannel.toml", "channel = \"q\"\n", "channel"),
     ] {

@@ -129,6 +129,58 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshLoadError> {
     decode_mesh(&bytes, path)
 }
 
+/// The other files a mesh file refers to, as the glTF reader finds them: a `.gltf` or `.glb`
+/// file's external buffers and images (relative URIs percent-decoded against its folder, and
+/// `file:` URIs). Empty for OBJ files (their `.mtl` files are never read) and for a file that
+/// cannot be read or parsed (loading it reports why). Used to keep outputs off every input.
+#[must_use]
+pub fn mesh_references(path: &Path) -> Vec<PathBuf> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    if !matches!(ext.as_str(), "gltf" | "glb") {
+        return Vec::new();
+    }
+    let Ok(bytes) = crate::read::read_capped(path, crate::read::MAX_MESH_BYTES, "a mesh file") else {
+        return Vec::new();
+    };
+    let Ok(gltf) = gltf::Gltf::from_slice_without_validation(&bytes) else { return Vec::new() };
+    let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let buffers = gltf.document.buffers().filter_map(|b| match b.source() {
+        gltf::buffer::Source::Uri(uri) => Some(uri),
+        gltf::buffer::Source::Bin => None,
+    });
+    let images = gltf.document.images().filter_map(|i| match i.source() {
+        gltf::image::Source::Uri { uri, .. } => Some(uri),
+        gltf::image::Source::View { .. } => None,
+    });
+    buffers.chain(images).filter_map(|uri| uri_path(uri, base)).collect()
+}
+
+/// The file a glTF URI names, as the glTF reader resolves it: `file:` URIs as they are, other
+/// schemes (`data:`, `http:`) none, relative ones percent-decoded against `base`.
+fn uri_path(uri: &str, base: &Path) -> Option<PathBuf> {
+    if uri.contains(':') {
+        let rest = uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:"))?;
+        return Some(PathBuf::from(rest));
+    }
+    let bytes = uri.as_bytes();
+    let mut decoded = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = |b: u8| (b as char).to_digit(16);
+        if bytes[i] == b'%'
+            && let (Some(hi), Some(lo)) =
+                (bytes.get(i + 1).and_then(|&b| hex(b)), bytes.get(i + 2).and_then(|&b| hex(b)))
+        {
+            decoded.push((hi * 16 + lo) as u8);
+            i += 3;
+        } else {
+            decoded.push(bytes[i]);
+            i += 1;
+        }
+    }
+    Some(base.join(String::from_utf8_lossy(&decoded).as_ref()))
+}
+
 /// [`load_mesh`] from the bytes of a mesh file; `path` names it in errors, its extension picks
 /// the format, and a `.gltf` file's external buffers are read from its folder.
 ///

@@ -23,10 +23,18 @@
 //!   replaced (atomically, as above) and the link stays.
 //!
 //! Every write error names the output, e.g. `cannot write /dev/full: No space left on device`.
+//!
+//! Interruption: every staged file of the process is listed in one registry, so that a program
+//! stopped by a signal can remove them all with [`remove_staged_files`] before it exits. Each
+//! [`Outputs::commit`] renames its files while holding that registry, so an interruption comes
+//! before or after a commit, never in the middle: a run's outputs appear all together or not at
+//! all.
 
+use std::cell::Cell;
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
+use std::sync::{Condvar, Mutex, MutexGuard, PoisonError};
 
 use crate::{IoError, PixelLayout, Pixels, WriteFail};
 
@@ -139,7 +147,7 @@ enum Dest {
     /// (the file itself, with symbolic links resolved).
     Replace {
         /// The staged file, in `target`'s folder.
-        tmp: tempfile::NamedTempFile,
+        tmp: Staged,
         /// The file to replace.
         target: PathBuf,
     },
@@ -337,12 +345,15 @@ impl Outputs {
         for slot in &self.slots {
             assert!(slot.written, "output {} was declared but not written", slot.path.display());
             if let Some(Dest::Replace { tmp, .. }) = &slot.dest {
-                tmp.as_file().sync_all().map_err(|reason| IoError::Write { path: slot.path.clone(), reason })?;
+                tmp.file().sync_all().map_err(|reason| IoError::Write { path: slot.path.clone(), reason })?;
             }
         }
-        for slot in std::mem::take(&mut self.slots) {
-            if let Some(Dest::Replace { tmp, target }) = slot.dest {
-                tmp.persist(&target).map_err(|e| IoError::Write { path: slot.path, reason: e.error })?;
+        // All renames under the registry: an interruption waits for them to be done.
+        let mut registry = registry();
+        for slot in &mut self.slots {
+            if let Some(Dest::Replace { tmp, target }) = &mut slot.dest {
+                tmp.persist(&mut registry, target)
+                    .map_err(|reason| IoError::Write { path: slot.path.clone(), reason })?;
             }
         }
         Ok(())
@@ -362,7 +373,7 @@ impl Outputs {
                     .map_err(|reason| IoError::Write { path: path.clone(), reason })?;
                 Ok(Sink::Device(file))
             }
-            Dest::Replace { tmp, .. } => Ok(Sink::Staged(tmp.as_file_mut())),
+            Dest::Replace { tmp, .. } => Ok(Sink::Staged(tmp.file_mut())),
         }
     }
 }
@@ -371,6 +382,10 @@ impl Outputs {
 /// be) a regular file.
 fn examine(path: &Path) -> Result<(Dest, Option<Identity>), IoError> {
     if is_std_stream(path) {
+        if stdout_was_closed() {
+            let reason = std::io::Error::other("standard output is closed (nothing would be written)");
+            return Err(OutputError::Unusable { path: path.to_owned(), reason }.into());
+        }
         return Ok((Dest::Stdout, None));
     }
     let unusable = |reason| OutputError::Unusable { path: path.to_owned(), reason };
@@ -425,6 +440,29 @@ fn examine(path: &Path) -> Result<(Dest, Option<Identity>), IoError> {
     Ok((Dest::Replace { tmp, target }, Some(Identity::Existing(key))))
 }
 
+/// Whether the program was started with its standard output closed (`>&-`). Rust's runtime
+/// then opens `/dev/null` in its place, read-write, so that every write would vanish without an
+/// error; a redirection to `/dev/null` opens it write-only, and is a choice. Linux only (it
+/// reads `/proc/self/fdinfo/1`); `false` elsewhere.
+fn stdout_was_closed() -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::fs::{FileTypeExt, MetadataExt};
+        let Ok(info) = std::fs::read_to_string("/proc/self/fdinfo/1") else { return false };
+        let flags =
+            info.lines().find_map(|l| l.strip_prefix("flags:")).and_then(|f| u32::from_str_radix(f.trim(), 8).ok());
+        // O_ACCMODE: 2 is O_RDWR.
+        let read_write = flags.is_some_and(|f| f & 3 == 2);
+        let is_null = match (std::fs::metadata("/proc/self/fd/1"), std::fs::metadata("/dev/null")) {
+            (Ok(out), Ok(null)) => out.file_type().is_char_device() && out.rdev() == null.rdev(),
+            _ => false,
+        };
+        read_write && is_null
+    }
+    #[cfg(not(target_os = "linux"))]
+    false
+}
+
 /// Read-only by its permission bits (not by trying: root can write anything).
 #[cfg(unix)]
 fn is_read_only(meta: &std::fs::Metadata) -> bool {
@@ -439,7 +477,7 @@ fn is_read_only(meta: &std::fs::Metadata) -> bool {
 
 /// A temporary file in `folder` with the permissions of the file it replaces, or ordinary ones
 /// for a new file (temporary files are private by default; the umask still applies).
-fn stage_in(folder: &Path, replaces: Option<&std::fs::Metadata>) -> std::io::Result<tempfile::NamedTempFile> {
+fn stage_in(folder: &Path, replaces: Option<&std::fs::Metadata>) -> std::io::Result<Staged> {
     let mut builder = tempfile::Builder::new();
     builder.prefix(".pomkit-").suffix(".tmp");
     #[cfg(unix)]
@@ -450,7 +488,100 @@ fn stage_in(folder: &Path, replaces: Option<&std::fs::Metadata>) -> std::io::Res
     }
     #[cfg(not(unix))]
     let _ = replaces;
-    builder.tempfile_in(folder)
+    Staged::create(folder, &builder)
+}
+
+// ---------------------------------------------------------------------------------------------
+// The registry of staged files
+// ---------------------------------------------------------------------------------------------
+
+/// Every staged file of the process, and whether [`remove_staged_files`] has run.
+struct Registry {
+    paths: Vec<PathBuf>,
+    removed: bool,
+}
+
+static REGISTRY: Mutex<Registry> = Mutex::new(Registry { paths: Vec::new(), removed: false });
+/// Never notified: what the other threads wait on forever once the staged files are removed.
+static NEVER: Condvar = Condvar::new();
+
+thread_local! {
+    /// Whether this thread removed the staged files (it may still write, e.g. a report).
+    static REMOVER: Cell<bool> = const { Cell::new(false) };
+}
+
+/// The registry, locked. Once [`remove_staged_files`] has run, every other thread blocks here
+/// for good (the process is about to exit): nothing more is staged or committed.
+fn registry() -> MutexGuard<'static, Registry> {
+    let mut guard = REGISTRY.lock().unwrap_or_else(PoisonError::into_inner);
+    while guard.removed && !REMOVER.get() {
+        guard = NEVER.wait(guard).unwrap_or_else(PoisonError::into_inner);
+    }
+    guard
+}
+
+/// Removes every file staged by any [`Outputs`] of the process, waiting for a commit in progress
+/// to finish first, and returns how many were removed. From then on, other threads that stage,
+/// commit or drop an output block for good; the calling thread may still write and commit (a
+/// batch's report). Meant for a program that is about to exit on a signal.
+pub fn remove_staged_files() -> usize {
+    let mut registry = REGISTRY.lock().unwrap_or_else(PoisonError::into_inner);
+    registry.removed = true;
+    REMOVER.set(true);
+    let mut removed = 0;
+    for path in registry.paths.drain(..) {
+        if std::fs::remove_file(&path).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// A staged file, listed in the registry from its creation until it is renamed into place or
+/// removed.
+struct Staged(Option<tempfile::NamedTempFile>);
+
+impl Staged {
+    fn create(folder: &Path, builder: &tempfile::Builder<'_, '_>) -> std::io::Result<Self> {
+        let mut registry = registry();
+        let tmp = builder.tempfile_in(folder)?;
+        registry.paths.push(tmp.path().to_owned());
+        Ok(Self(Some(tmp)))
+    }
+
+    fn file(&self) -> &File {
+        self.0.as_ref().expect("a staged file before it is renamed").as_file()
+    }
+
+    fn file_mut(&mut self) -> &mut File {
+        self.0.as_mut().expect("a staged file before it is renamed").as_file_mut()
+    }
+
+    /// Renames the staged file over `target`; `registry` is the locked registry. On failure the
+    /// staged file is removed.
+    fn persist(&mut self, registry: &mut Registry, target: &Path) -> std::io::Result<()> {
+        let tmp = self.0.take().expect("a staged file is renamed once");
+        let path = tmp.path().to_owned();
+        registry.paths.retain(|p| *p != path);
+        match tmp.persist(target) {
+            Ok(_) => Ok(()),
+            Err(e) => {
+                drop(e.file);
+                Err(e.error)
+            }
+        }
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        if let Some(tmp) = self.0.take() {
+            let mut registry = registry();
+            let path = tmp.path().to_owned();
+            registry.paths.retain(|p| *p != path);
+            let _ = tmp.close();
+        }
+    }
 }
 
 fn display_name(path: &Path) -> String {

@@ -143,6 +143,20 @@ fn check_signature(head: &[u8], path: &Path) -> Result<(), IoError> {
 /// budget.
 const HEADER_BYTES: u64 = 16 << 20;
 
+/// The width, height and decoded size in bytes of the image file `path`, read from its header
+/// alone (for memory estimates before a file is read); `None` when the header cannot be read
+/// or the format is not one the image decoders know (single-channel OpenEXR, float TIFF).
+#[must_use]
+pub fn image_header(path: &Path) -> Option<(u32, u32, u64)> {
+    let meta = std::fs::metadata(path).ok()?;
+    if !meta.is_file() {
+        return None;
+    }
+    let decoder = ImageReader::open(path).ok()?.with_guessed_format().ok()?.into_decoder().ok()?;
+    let (width, height) = decoder.dimensions();
+    Some((width, height, decoder.total_bytes()))
+}
+
 /// Decodes an image held to [`MAX_SIZE`] texels a side and to the memory budget
 /// ([`pomkit_core::memory`]): `extra_per_pixel` bytes per pixel that the caller allocates
 /// after decoding (a height field's floats, say) count toward it. The dimensions are read from

@@ -111,6 +111,21 @@ impl Loader<'_> {
                 if let Some((field, _)) = set.into_iter().find(|(_, on)| *on) {
                     return Err(self.invalid(at, field, format!("{field} is set but the material has no height map")));
                 }
+                // What only a relief can do: cut the silhouette, shade by its depth.
+                if m.silhouette == Some(true) {
+                    return Err(self.invalid(
+                        at,
+                        "silhouette",
+                        "silhouette = true cuts the outline along the relief, but the material has no height map",
+                    ));
+                }
+                if m.shadow.is_some() && shadow_mode == ShadowMode::Depth {
+                    return Err(self.invalid(
+                        at,
+                        "shadow",
+                        "shadow = \"depth\" shades by the depth of the relief, but the material has no height map",
+                    ));
+                }
                 if let Some(t) = m.technique.as_ref().filter(|_| technique.displaces()) {
                     return Err(self.invalid(
                         at,

@@ -435,9 +435,10 @@ fn read_scene_text(path: &Path) -> Result<String, SceneError> {
 }
 
 /// The files a scene file reads, without loading them: the scene file itself, then every
-/// texture (albedo, height, normal map) and mesh file it names, resolved as [`load_scene`]
-/// resolves them (built-in maps and shapes are not files). For a program that must not write
-/// over its inputs (`pomkit render -o`); a glTF file's own buffers and images are not listed.
+/// texture (albedo, height, normal and cone map) and mesh file it names, resolved as
+/// [`load_scene`] resolves them (built-in maps and shapes are not files), and the external
+/// buffers and images of its glTF meshes ([`crate::mesh::mesh_references`]). For a program
+/// that must not write over its inputs (`pomkit render -o`).
 ///
 /// # Errors
 /// [`SceneError::Read`] or [`SceneError::Syntax`], as [`load_scene`] gives them (so scene files
@@ -453,12 +454,18 @@ pub fn scene_inputs(path: &Path) -> Result<Vec<PathBuf>, SceneError> {
         }
     };
     for m in &parsed.material {
-        [&m.albedo, &m.height, &m.normal].into_iter().flatten().for_each(|v| add(v));
+        [&m.albedo, &m.height, &m.normal, &m.cone_map].into_iter().flatten().for_each(|v| add(v));
     }
+    let mut meshes = Vec::new();
     for o in &parsed.object {
         if !is_shape(&o.mesh.trim().to_ascii_lowercase()) {
             add(&o.mesh);
+            meshes.push(base.join(&o.mesh));
         }
+    }
+    // A glTF mesh's external buffers and images.
+    for mesh in meshes {
+        files.extend(crate::mesh::mesh_references(&mesh));
     }
     Ok(files)
 }
