@@ -539,3 +539,26 @@ fn a_render_of_far_more_triangles_than_pixels_is_refused_for_its_time() {
         &["render of 160x90 of s.toml (11 objects, 83968028 triangles", "1.0 GiB is available"],
     );
 }
+
+/// A cone bake of an image file counts the height field it holds beside the cones: under a
+/// fixed budget a little above the cones' own estimate (`ConeMap::build_bytes`) but below it
+/// plus the field (4 bytes a texel), the bake is refused before it builds anything. (The field
+/// was left out, about a tenth of a large cone bake's peak.)
+#[test]
+fn a_cone_bake_of_a_file_counts_the_height_field_it_holds() {
+    let dir = tempfile::tempdir().unwrap();
+    let made = pomkit_env(&["generate", "bricks", "--size", "256x256", "-o", "h.png"], dir.path(), &[]);
+    assert!(made.status.success(), "{}", stderr(&made));
+    let cones = pomkit_core::cone::ConeMap::build_bytes(256, 256);
+    let field = 256 * 256 * 4;
+    let limit = (cones + field / 2).to_string();
+    refuses_env(
+        &["bake", "cone", "h.png", "-o", "c.png"],
+        dir.path(),
+        &[("POMKIT_MEMORY_LIMIT", &limit)],
+        &["the cone map of a 256x256 map (h.png) needs about", "smaller height map"],
+    );
+    let enough = (cones + field + (1 << 20)).to_string();
+    let out = pomkit_env(&["bake", "cone", "h.png", "-o", "c.png"], dir.path(), &[("POMKIT_MEMORY_LIMIT", &enough)]);
+    assert!(out.status.success(), "the cones and the field fit: {}", stderr(&out));
+}
