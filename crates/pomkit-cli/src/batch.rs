@@ -20,7 +20,6 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use pomkit_core::cone::ConeMap;
 use pomkit_core::memory::{Budget, MemoryError};
-use serde::Deserialize;
 
 use pomkit_io::output::{FileKey, Outputs, regular_file_key};
 
@@ -788,22 +787,6 @@ impl Template {
 // Per-folder and per-pattern options
 // ---------------------------------------------------------------------------------------------
 
-#[derive(Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-struct RuleFile {
-    #[serde(rename = "match")]
-    pattern: Option<String>,
-    folder: Option<String>,
-    scale: Option<f32>,
-    filter: Option<String>,
-    edges: Option<String>,
-    y_down: Option<bool>,
-    depth_map: Option<bool>,
-    channel: Option<String>,
-    normalize: Option<bool>,
-    encoding: Option<String>,
-}
-
 /// One checked rule.
 struct Rule {
     pattern: Option<glob::Pattern>,
@@ -826,23 +809,10 @@ struct Rules(Vec<Rule>);
 
 impl Rules {
     fn load(path: &Path) -> Result<Self> {
-        let bytes = pomkit_io::read::read_capped(path, pomkit_io::read::MAX_SCENE_BYTES, "a config file")
-            .with_context(|| format!("cannot read the config {}", path.display()))?;
-        let text = String::from_utf8(bytes).with_context(|| format!("config {}: not UTF-8 text", path.display()))?;
-        let table: toml::Table = toml::from_str(&text).with_context(|| format!("config {}", path.display()))?;
-        if let Some(key) = table.keys().find(|k| k.as_str() != "rule") {
-            bail!("config {}: unknown key `{key}` (a config holds [[rule]] tables only)", path.display());
-        }
-        let raw_rules = match table.get("rule") {
-            None => Vec::new(),
-            Some(toml::Value::Array(rules)) => rules.clone(),
-            Some(_) => bail!("config {}: `rule` must be written as [[rule]] tables", path.display()),
-        };
-        let mut rules = Vec::new();
-        for (i, raw) in raw_rules.into_iter().enumerate() {
+        let raw_rules = pomkit_io::batch_config::load_config(path)?;
+        let mut rules = Vec::with_capacity(raw_rules.len());
+        for (i, r) in raw_rules.into_iter().enumerate() {
             let at = |key: &str| format!("config {}, [[rule]] {}, {key}", path.display(), i + 1);
-            let r: RuleFile =
-                raw.try_into().with_context(|| format!("config {}, [[rule]] {}", path.display(), i + 1))?;
             let filter = choice::<FilterArg>(r.filter.as_deref(), || at("filter"))?;
             let edges = choice::<EdgesArg>(r.edges.as_deref(), || at("edges"))?;
             let channel = choice::<ChannelArg>(r.channel.as_deref(), || at("channel"))?;
@@ -862,24 +832,9 @@ impl Rules {
                 }
                 e => e,
             };
-            if let Some(scale) = r.scale
-                && !(scale.is_finite() && scale.abs() <= pomkit_core::bake::MAX_SCALE)
-            {
-                bail!(
-                    "{}: {scale} is not a finite number of texel widths from -{max:e} to {max:e}",
-                    at("scale"),
-                    max = pomkit_core::bake::MAX_SCALE
-                );
-            }
-            let pattern = r.pattern.as_deref().map(glob::Pattern::new).transpose().with_context(|| at("match"))?;
-            // Relative to the folder argument: "." (or "") is all of it, "./rocks" is "rocks".
-            let folder = r
-                .folder
-                .as_deref()
-                .map(|f| Path::new(f).components().filter(|c| matches!(c, Component::Normal(_))).collect::<PathBuf>());
             rules.push(Rule {
-                pattern,
-                folder,
+                pattern: r.pattern,
+                folder: r.folder,
                 scale: r.scale,
                 filter,
                 edges,

@@ -44,6 +44,7 @@ pub const TARGETS: &[Target] = &[
     Target { name: "obj", input: OBJ_INPUT, run: obj },
     Target { name: "gltf", input: GLTF_INPUT, run: gltf },
     Target { name: "rays", input: RAYS_INPUT, run: rays },
+    Target { name: "batch_config", input: CONFIG_INPUT, run: batch_config },
 ];
 
 const HEIGHT_INPUT: &str = "fuzz-height-input";
@@ -52,6 +53,7 @@ const SCENE_INPUT: &str = "fuzz-scene.toml";
 const OBJ_INPUT: &str = "fuzz-mesh.obj";
 const GLTF_INPUT: &str = "fuzz-mesh.gltf";
 const RAYS_INPUT: &str = "fuzz-rays.csv";
+const CONFIG_INPUT: &str = "fuzz-rules.toml";
 
 /// The outcome of a load; panics when an error's message does not name `input`.
 fn check<T, E: std::fmt::Display>(result: Result<T, E>, input: &str) -> Outcome {
@@ -174,4 +176,11 @@ fn builtin_area(s: &str) -> u64 {
         }
         _ => 0,
     }
+}
+
+/// The rules file of a batch bake (`bake --config`): the bytes are its text (skipped unless
+/// UTF-8, as `load_config` refuses other bytes before parsing).
+pub fn batch_config(data: &[u8]) -> Outcome {
+    let Ok(text) = std::str::from_utf8(data) else { return Outcome::Skipped };
+    check(crate::batch_config::parse_config(text, Path::new(CONFIG_INPUT)), CONFIG_INPUT)
 }

@@ -17,6 +17,7 @@ use pomkit_core::cone::ConeMap;
 use pomkit_core::{EdgeMode, HeightField, HeightFieldError};
 
 #[doc(hidden)]
+pub mod batch_config;
 mod float;
 use float::float_samples;
 pub mod fuzz_entry;

@@ -60,7 +60,7 @@ fn check(name: &str) {
 #[test]
 fn every_target_has_a_test_here() {
     let names: Vec<&str> = TARGETS.iter().map(|t| t.name).collect();
-    assert_eq!(names, ["height_image", "normal_map", "scene", "obj", "gltf", "rays"]);
+    assert_eq!(names, ["height_image", "normal_map", "scene", "obj", "gltf", "rays", "batch_config"]);
     for t in TARGETS {
         let source = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../fuzz/fuzz_targets/{}.rs", t.name));
         assert!(source.is_file(), "no fuzz target {}", source.display());
@@ -97,6 +97,11 @@ fn rays_corpus() {
     check("rays");
 }
 
+#[test]
+fn batch_config_corpus() {
+    check("batch_config");
+}
+
 /// The entries refuse what is not a file of their format with a message naming the input, and
 /// load the smallest valid file of their format.
 #[test]
@@ -120,6 +125,8 @@ fn entries_refuse_garbage_and_load_valid_files() {
     // A scene asking for a 4096x4096 built-in is not passed to the parser.
     let big = scene.replace("h.png", "builtin:bricks:4096x4096");
     assert_eq!(run("scene", big.as_bytes()), Outcome::Skipped);
+    let rules = "[[rule]]\nfolder = \"rocks\"\nscale = 4.0\n\n[[rule]]\nmatch = \"*_gl.png\"\ny_down = false\n";
+    assert_eq!(run("batch_config", rules.as_bytes()), Outcome::Loaded);
 }
 
 /// The crashes the fuzzer found (docs/FUZZING.md, "What was found") are refused with their
