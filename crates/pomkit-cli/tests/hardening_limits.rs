@@ -562,3 +562,32 @@ fn a_cone_bake_of_a_file_counts_the_height_field_it_holds() {
     let out = pomkit_env(&["bake", "cone", "h.png", "-o", "c.png"], dir.path(), &[("POMKIT_MEMORY_LIMIT", &enough)]);
     assert!(out.status.success(), "the cones and the field fit: {}", stderr(&out));
 }
+
+/// Long work that reports no rows shows a spinner on a terminal, so it does not look like a
+/// hang: building a maximum-height pyramid and loading a scene with large built-in maps. Run
+/// under a pseudo-terminal (`script`), as a user at a terminal sees it.
+#[cfg(unix)]
+#[test]
+fn long_work_shows_progress_on_a_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("s.toml"), scene("builtin:fur:2048x2048", "")).unwrap();
+    let exe = env!("CARGO_BIN_EXE_pomkit");
+    let cases: [(&str, &[&str]); 2] = [
+        ("bake maxmip builtin:fur:2048x2048 -o m.png", &["generating fur 2048x2048", "building the pyramid"]),
+        ("render s.toml --backend cpu --size 32x18 -o r.png", &["loading s.toml"]),
+    ];
+    for (args, needles) in cases {
+        let out = Command::new("script")
+            .args(["-qec", &format!("{exe} {args}"), "/dev/null"])
+            .current_dir(dir.path())
+            .env("TERM", "xterm")
+            .stdin(Stdio::null())
+            .output()
+            .expect("script runs");
+        let seen = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{args}: {seen}");
+        for needle in needles {
+            assert!(seen.contains(needle), "{args}: no {needle:?} on the terminal: {seen}");
+        }
+    }
+}
