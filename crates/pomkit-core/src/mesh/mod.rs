@@ -145,6 +145,47 @@ pub fn uv_unit_length(uv_scale: Vec2) -> f32 {
     s.x.sqrt() * s.y.sqrt()
 }
 
+/// The mean world length of one UV unit over a triangle list: `sqrt(sum of world areas / sum of
+/// UV areas)`, both summed over every triangle (so each triangle weighs by its area).
+///
+/// This is the one scale that turns a relief given in the mesh's own units (a glTF
+/// `KHR_materials_displacement` factor, a texture library's "depth in centimetres") into
+/// pomkit's `depth_scale` in UV units: `depth_scale = depth / L` ([`displacement_depth_scale`]).
+/// Give the positions in the units the depth is measured in (a glTF mesh's own, before its node
+/// transform: a uniform node scale changes both alike). For a mapping of uniform scale it equals
+/// [`uv_unit_length`] at every vertex.
+///
+/// `None` when there is no triangle, an index is out of range, a value is not finite, or the
+/// UVs cover no area (every triangle's UVs collinear).
+#[must_use]
+pub fn mean_uv_unit_length(positions: &[[f32; 3]], uvs: &[[f32; 2]], indices: &[u32]) -> Option<f32> {
+    if positions.len() != uvs.len() {
+        return None;
+    }
+    let (mut world, mut uv) = (0.0f64, 0.0f64);
+    for tri in indices.chunks_exact(3) {
+        let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| i as usize);
+        let (pa, pb, pc) = (positions.get(a)?, positions.get(b)?, positions.get(c)?);
+        let (ta, tb, tc) = (uvs.get(a)?, uvs.get(b)?, uvs.get(c)?);
+        let p = |v: &[f32; 3]| DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+        let t = |v: &[f32; 2]| DVec2::new(f64::from(v[0]), f64::from(v[1]));
+        world += (p(pb) - p(pa)).cross(p(pc) - p(pa)).length() * 0.5;
+        uv += (t(tb) - t(ta)).perp_dot(t(tc) - t(ta)).abs() * 0.5;
+    }
+    let l = (world / uv).sqrt();
+    (world.is_finite() && uv > 0.0 && l.is_finite() && l > 0.0).then_some(l as f32)
+}
+
+/// pomkit's `depth_scale` (UV units) of a relief `depth` units deep on a mesh whose mean UV unit
+/// is `units_per_uv` long ([`mean_uv_unit_length`]): `depth / units_per_uv`. `None` when either
+/// is not finite or not positive.
+#[must_use]
+pub fn displacement_depth_scale(depth: f32, units_per_uv: f32) -> Option<f32> {
+    let d = depth / units_per_uv;
+    (depth.is_finite() && depth > 0.0 && units_per_uv.is_finite() && units_per_uv > 0.0 && d.is_finite() && d > 0.0)
+        .then_some(d)
+}
+
 /// Converts a world direction into pomkit's tangent-space ray direction `(du, dv, dz)`.
 ///
 /// `view_dir_world` is the direction of *travel* (from the eye toward the surface for a view
@@ -591,6 +632,30 @@ mod tests {
     use proptest::prelude::*;
     use std::collections::HashMap;
     use std::f64::consts::PI;
+
+    #[test]
+    fn the_mean_uv_unit_of_a_plane_is_its_size_and_ignores_uv_offsets() {
+        // A 4 x 2 rectangle mapped to UVs [0.5, 1.5] x [0, 2]: one UV unit is 4 world units along
+        // u and 1 along v, so the mean is sqrt(8 / 2) = 2.
+        let positions = [[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [4.0, 2.0, 0.0], [0.0, 2.0, 0.0]];
+        let uvs = [[0.5, 2.0], [1.5, 2.0], [1.5, 0.0], [0.5, 0.0]];
+        let l = mean_uv_unit_length(&positions, &uvs, &[0, 1, 2, 0, 2, 3]).unwrap();
+        assert!((l - 2.0).abs() < 1e-6, "{l}");
+        // Equal to the per-vertex length of a uniformly mapped shape.
+        let m = Mesh::plane(Vec2::splat(3.0), 4);
+        let p: Vec<[f32; 3]> = m.positions.iter().map(|v| v.to_array()).collect();
+        let t: Vec<[f32; 2]> = m.uvs.iter().map(|v| v.to_array()).collect();
+        let l = mean_uv_unit_length(&p, &t, &m.indices).unwrap();
+        assert!((l - uv_unit_length(m.uv_scale[0])).abs() < 1e-5, "{l}");
+        assert!((displacement_depth_scale(0.3, l).unwrap() - 0.1).abs() < 1e-6);
+        // Degenerate input is None, never NaN.
+        assert_eq!(mean_uv_unit_length(&positions, &[[0.0, 0.0]; 4], &[0, 1, 2]), None);
+        assert_eq!(mean_uv_unit_length(&positions, &uvs, &[0, 1, 9]), None);
+        assert_eq!(mean_uv_unit_length(&positions, &uvs, &[]), None);
+        assert_eq!(displacement_depth_scale(-1.0, 1.0), None);
+        assert_eq!(displacement_depth_scale(f32::NAN, 1.0), None);
+        assert_eq!(displacement_depth_scale(1.0, 0.0), None);
+    }
 
     /// The angle between two vectors (atan2, accurate near 0 unlike acos in f32).
     fn degrees(a: Vec3, b: Vec3) -> f32 {
