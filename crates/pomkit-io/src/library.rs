@@ -391,8 +391,8 @@ pub fn mean_roughness(path: &Path) -> Result<f32, crate::IoError> {
 }
 
 /// The scene pomkit draws a texture-library folder on (`pomkit render --material FOLDER`,
-/// `pomkit view --material FOLDER`): a 2 x 2 plane under a low sun, seen at about 30 degrees
-/// above it, with a `[[material]]` named after the folder whose `folder` is `folder` (every
+/// `pomkit view --material FOLDER`): a 2 x 2 plane (the maps once across it) under a low sun,
+/// seen from about 40 degrees above it, filling most of a 16:9 frame, with a `[[material]]` named after the folder whose `folder` is `folder` (every
 /// other key at its default, as for `material = "FOLDER"`). Parse it with the paths relative
 /// to the current folder (`pomkit_io::scene::parse_scene(&text, Path::new("."))`).
 #[must_use]
@@ -409,8 +409,8 @@ pub fn preview_scene(folder: &Path) -> String {
 ambient = [0.05, 0.05, 0.06]
 
 [camera]
-eye = [0.0, 1.45, 2.55]
-target = [0.0, 0.0, 0.0]
+eye = [0.0, 1.2, 1.6]
+target = [0.0, -0.15, 0.05]
 fov = 45.0
 
 [[light]]
