@@ -38,6 +38,8 @@
 //!
 //! [[material]]
 //! name = "bricks"                   # default "material N" (N counts from 1); names are unique
+//! folder = "textures/Bricks"        # a texture-library folder whose maps fill in albedo,
+//!                                   # normal and height where the table names none
 //! albedo = "bricks_albedo.png"      # colour map (sRGB file, or linear float EXR); default white
 //! height = "bricks_height.png"      # height map; default none (the material is then flat
 //!                                   # or normal-mapped only)
@@ -71,13 +73,19 @@
 //! [[object]]                        # at least one
 //! name = "floor"                    # default "object N"
 //! mesh = "plane"                    # required: a built-in shape or a .obj/.gltf/.glb path
-//! material = "bricks"               # required: a material's name
+//! material = "bricks"               # required: a material's name, or a texture-library folder
 //! size = [4.0, 4.0]                 # shape parameters, see below (this one: default 2)
 //! uv_repeat = [2.0, 2.0]            # texture repeats along u and v (or one number); default 1
 //! position = [0.0, 0.0, 0.0]
 //! rotation = [0.0, 45.0, 0.0]       # degrees about X, then Y, then Z (default 0)
 //! scale = [1.0, 1.0, 1.0]           # or one number; every component > 0
 //! ```
+//!
+//! # Texture-library folders
+//!
+//! `material = "FOLDER"` on an object (when no material has that name and the path is a
+//! folder) and `folder = "FOLDER"` on a material take a texture library's folder of maps,
+//! found by their names ([`crate::library`], docs/SCENES.md).
 //!
 //! # Built-in textures
 //!
