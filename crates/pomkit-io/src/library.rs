@@ -582,7 +582,7 @@ fn tokens(stem: &str) -> Vec<String> {
 }
 
 fn file_name(path: &Path) -> String {
-    let name = path.file_name().map_or_else(|| path.as_os_str(), |n| n);
+    let name = path.file_name().unwrap_or(path.as_os_str());
     crate::shown(Path::new(name)).to_string()
 }
 
