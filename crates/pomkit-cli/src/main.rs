@@ -7,6 +7,7 @@ mod batch;
 mod bench;
 mod compare;
 mod interrupt;
+mod library;
 mod output;
 mod progress;
 mod render;
@@ -67,6 +68,11 @@ struct ViewArgs {
     /// shadow (the light's visibility) or depth (hit depth).
     #[arg(long, value_name = "NAME")]
     overlay: Option<String>,
+    /// A texture-library folder to open (its maps found by name, as `render --material`), as a
+    /// scene of one plane whose material's `folder` is DIR; the panel then tunes it. Not with
+    /// a scene file.
+    #[arg(long, value_name = "DIR", conflicts_with = "scene")]
+    material: Option<PathBuf>,
 }
 
 #[cfg(feature = "view")]
@@ -80,8 +86,12 @@ fn view(args: &ViewArgs) -> Result<()> {
         .transpose()
         .map_err(anyhow::Error::msg)
         .context("--overlay")?;
+    // A texture-library folder: its maps listed (and checked) before the window opens.
+    if let Some(dir) = &args.material {
+        library::Folder::open(dir)?;
+    }
     pomkit_viewer::run(pomkit_viewer::ViewerOptions {
-        scene: args.scene.clone(),
+        scene: args.scene.clone().or_else(|| args.material.clone()),
         screenshot: args.screenshot.clone(),
         compare,
         overlay,
@@ -364,7 +374,7 @@ fn main() -> ExitCode {
 mod headless {
     #[test]
     fn view_without_the_viewer_says_how_to_get_it() {
-        let args = super::ViewArgs { scene: None, screenshot: None, compare: None, overlay: None };
+        let args = super::ViewArgs { scene: None, screenshot: None, compare: None, overlay: None, material: None };
         let err = super::view(&args).unwrap_err().to_string();
         assert!(err.contains("without the viewer") && err.contains("--no-default-features"), "{err}");
     }

@@ -63,6 +63,12 @@ pub struct RenderArgs {
     /// texel everywhere; several times slower).
     #[arg(long, default_value_t = pomkit_core::render::DISPLACED_TOLERANCE, value_name = "PX")]
     displaced_tolerance: f32,
+    /// A texture-library folder (ambientCG, Poly Haven, ...): its colour, normal, height and
+    /// roughness maps, found by their names and listed on standard error, drawn as one material
+    /// on a plane under a low sun. Not with a scene file: in a scene, write material = "DIR" on
+    /// an object (docs/SCENES.md).
+    #[arg(long, value_name = "DIR", conflicts_with = "scene")]
+    material: Option<PathBuf>,
 }
 
 /// A technique name or `displaced`, given to `flag` (`--technique` or `--compare`), which an
@@ -111,6 +117,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             outs.input(input);
         }
     }
+    let folder = a.material.as_deref().map(crate::library::Folder::open).transpose()?;
+    for input in folder.iter().flat_map(crate::library::Folder::inputs) {
+        outs.input(input);
+    }
     let png = outs.output(&a.output);
     let mut aov_outputs: Vec<(String, OutputId)> = Vec::new();
     if modes.is_empty() {
@@ -142,6 +152,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             renderer.check_sizes(&sizes, &RenderOptions { mode: *m, ..base }, path)?;
         }
     }
+    if let Some(f) = &folder {
+        let sizes = f.sizes()?;
+        for m in &all_modes {
+            renderer.check_sizes(&sizes, &RenderOptions { mode: *m, ..base }, &f.dir)?;
+        }
+    }
     let scene = match &a.scene {
         // Generating big built-in maps and shapes reports no progress: a spinner, so it does
         // not look like a hang.
@@ -149,7 +165,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             let work = pomkit_io::scene::scene_sizes(path).map_or(0, |s| scene_work(&s));
             progress::spinner(work, &format!("loading {}", path.display()), || pomkit_io::scene::load_scene(path))?
         }
-        None => pomkit_core::demo::demo_scene(),
+        None => match &folder {
+            Some(f) => f.load()?,
+            None => pomkit_core::demo::demo_scene(),
+        },
     };
     // A baked cone map that no technique of this render steps on is harmless, but likely not
     // what was meant.

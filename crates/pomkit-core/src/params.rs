@@ -710,7 +710,7 @@ pub const OTHER_PARAMS: [Param; 13] = [
 ];
 
 /// The material keys that name files or the material itself, which are not parameters.
-pub const FILE_KEYS: [&str; 5] = ["name", "albedo", "height", "normal", "cone_map"];
+pub const FILE_KEYS: [&str; 6] = ["name", "albedo", "height", "normal", "cone_map", "folder"];
 
 /// Every parameter, in table order.
 pub fn all() -> impl Iterator<Item = &'static Param> {

@@ -103,11 +103,19 @@ impl SceneDoc {
         Self { table: Table::new(), material: 0, object: 0 }
     }
 
-    /// Opens a scene file.
+    /// Opens a scene file, or a texture-library folder ([`pomkit_io::library`]) as the scene
+    /// `pomkit render --material` draws: one plane whose `[[material]]` has `folder` set to it.
     ///
     /// # Errors
-    /// [`DocError`] naming the file when it cannot be read or is not a valid scene.
+    /// [`DocError`] naming the file when it cannot be read or is not a valid scene (for a
+    /// folder, when its maps cannot be told or loaded).
     pub fn open(path: &Path) -> Result<Self, DocError> {
+        if path.is_dir() {
+            let text = pomkit_io::library::preview_scene(path);
+            let doc = Self::parse(&text, path, Path::new("."))?;
+            doc.build_named(path, &mut SceneCache::default())?;
+            return Ok(doc);
+        }
         let text = std::fs::read_to_string(path).map_err(|reason| DocError::Read { path: path.to_owned(), reason })?;
         let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
         let doc = Self::parse(&text, path, base)?;
@@ -399,6 +407,10 @@ impl FileKind {
     /// By extension.
     #[must_use]
     pub fn of(path: &Path) -> FileKind {
+        // A folder is opened as a texture-library material.
+        if path.is_dir() {
+            return FileKind::Scene;
+        }
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("toml") => FileKind::Scene,
             Some("obj" | "gltf" | "glb") => FileKind::Mesh,
@@ -433,15 +445,33 @@ fn absolutize(table: &mut Table, base: &Path) {
     };
     if let Some(ms) = table.get_mut("material").and_then(Value::as_array_mut) {
         for m in ms.iter_mut().filter_map(Value::as_table_mut) {
-            for key in ["albedo", "height", "normal"] {
+            for key in ["albedo", "height", "normal", "folder"] {
                 if let Some(v) = m.get_mut(key) {
                     fix(v);
                 }
             }
         }
     }
+    let materials: Vec<String> = table
+        .get("material")
+        .and_then(Value::as_array)
+        .map_or(&[][..], Vec::as_slice)
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            m.get("name").and_then(Value::as_str).map_or_else(|| format!("material {}", i + 1), str::to_owned)
+        })
+        .collect();
     if let Some(os) = table.get_mut("object").and_then(Value::as_array_mut) {
         for o in os.iter_mut().filter_map(Value::as_table_mut) {
+            // `material = "FOLDER"`: a texture-library folder, when no material has that name.
+            let folder = o
+                .get("material")
+                .and_then(Value::as_str)
+                .is_some_and(|m| !m.trim().is_empty() && !materials.iter().any(|n| n == m) && base.join(m).is_dir());
+            if folder && let Some(v) = o.get_mut("material") {
+                fix(v);
+            }
             let shape = o.get("mesh").and_then(Value::as_str).map(|s| s.trim().to_ascii_lowercase());
             let builtin = shape.as_deref().is_some_and(|s| SHAPES.iter().any(|(n, _)| *n == s));
             if !builtin && let Some(v) = o.get_mut("mesh") {
@@ -499,6 +529,55 @@ mod tests {
         // The plane's `size` was dropped: a torus does not take it (the loader would refuse it).
         assert!(doc.object_field("size").is_none());
         assert!(scene.objects[0].mesh.triangle_count() > 1000);
+    }
+
+    /// A folder of ambientCG-style maps: colour, OpenGL normal, displacement (8 x 8).
+    fn library_folder(dir: &Path) {
+        image::RgbImage::from_pixel(8, 8, image::Rgb([200, 100, 50])).save(dir.join("Rock_1K_Color.png")).unwrap();
+        image::RgbImage::from_pixel(8, 8, image::Rgb([128, 200, 200])).save(dir.join("Rock_1K_NormalGL.png")).unwrap();
+        image::GrayImage::from_fn(8, 8, |x, _| image::Luma([(x * 30) as u8]))
+            .save(dir.join("Rock_1K_Displacement.png"))
+            .unwrap();
+    }
+
+    #[test]
+    fn a_texture_library_folder_opens_as_a_tunable_material() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("Rock");
+        std::fs::create_dir(&dir).unwrap();
+        library_folder(&dir);
+        assert_eq!(FileKind::of(&dir), FileKind::Scene, "a dropped folder opens as a scene");
+        let mut doc = SceneDoc::open(&dir).expect("the folder opens");
+        assert_eq!(doc.material_names(), ["Rock"]);
+        let folder = doc.material_field("folder").and_then(Value::as_str).map(PathBuf::from).unwrap();
+        assert!(folder.is_absolute() && folder.ends_with("Rock"), "{}", folder.display());
+        // The panel's edits override the folder's defaults.
+        doc.set_material_field("technique", Some(Value::String("relief".into())));
+        let scene = doc.build(&mut SceneCache::default()).expect("builds");
+        let m = &scene.materials[0];
+        assert_eq!(m.technique, pomkit_core::trace::Technique::Relief);
+        assert_eq!(m.albedo.as_ref().map(|t| t.width()), Some(8));
+        assert!(m.normal_map.is_some() && m.height.is_some());
+        // Exported and opened elsewhere, it still finds the folder.
+        let again = SceneDoc::from_text(&doc.to_toml(), Path::new("/elsewhere")).expect("round trip");
+        assert!(again.build(&mut SceneCache::default()).is_ok());
+        // A folder without a height map is refused, naming it and what it holds.
+        std::fs::remove_file(dir.join("Rock_1K_Displacement.png")).unwrap();
+        let err = SceneDoc::open(&dir).expect_err("no height").to_string();
+        assert!(err.contains("no height map") && err.contains("Rock_1K_Color.png"), "{err}");
+    }
+
+    #[test]
+    fn an_objects_relative_folder_material_becomes_absolute() {
+        let tmp = tempfile::tempdir().unwrap();
+        std::fs::create_dir(tmp.path().join("Rock")).unwrap();
+        library_folder(&tmp.path().join("Rock"));
+        let text = DEFAULT_SCENE.replace("material = \"bricks\"\n", "material = \"Rock\"\n");
+        let doc = SceneDoc::from_text(&text, tmp.path()).expect("parses");
+        let material = doc.object_field("material").and_then(Value::as_str).unwrap();
+        assert_eq!(Path::new(material), tmp.path().join("Rock"));
+        let scene = doc.build(&mut SceneCache::default()).expect("builds from anywhere");
+        assert_eq!(scene.objects[0].material, 1, "the folder's material, after the table's");
     }
 
     #[test]

@@ -6,11 +6,20 @@ use super::*;
 impl Loader<'_> {
     pub(super) fn material(&mut self, i: usize, m: &MaterialFile) -> Result<Material, SceneError> {
         let name = m.name.clone().unwrap_or_else(|| format!("material {}", i + 1));
-        let at = match &m.name {
-            Some(n) => format!("material {n:?}"),
-            None => format!("material {}", i + 1),
+        let at = match (&m.from_object, &m.name) {
+            (Some(object), _) => object.clone(),
+            (None, Some(n)) => format!("material {n:?}"),
+            (None, None) => format!("material {}", i + 1),
         };
         let at = at.as_str();
+        // A texture-library folder's maps, filled in as if the table named them.
+        let filled;
+        let m = if m.folder.is_some() {
+            filled = self.folder_material(at, m)?;
+            &filled
+        } else {
+            m
+        };
         let d = Material::default();
         let td = TraceParams::default();
 

@@ -38,6 +38,8 @@
 //!
 //! [[material]]
 //! name = "bricks"                   # default "material N" (N counts from 1); names are unique
+//! folder = "textures/Bricks"        # a texture-library folder whose maps fill in albedo,
+//!                                   # normal and height where the table names none
 //! albedo = "bricks_albedo.png"      # colour map (sRGB file, or linear float EXR); default white
 //! height = "bricks_height.png"      # height map; default none (the material is then flat
 //!                                   # or normal-mapped only)
@@ -71,13 +73,19 @@
 //! [[object]]                        # at least one
 //! name = "floor"                    # default "object N"
 //! mesh = "plane"                    # required: a built-in shape or a .obj/.gltf/.glb path
-//! material = "bricks"               # required: a material's name
+//! material = "bricks"               # required: a material's name, or a texture-library folder
 //! size = [4.0, 4.0]                 # shape parameters, see below (this one: default 2)
 //! uv_repeat = [2.0, 2.0]            # texture repeats along u and v (or one number); default 1
 //! position = [0.0, 0.0, 0.0]
 //! rotation = [0.0, 45.0, 0.0]       # degrees about X, then Y, then Z (default 0)
 //! scale = [1.0, 1.0, 1.0]           # or one number; every component > 0
 //! ```
+//!
+//! # Texture-library folders
+//!
+//! `material = "FOLDER"` on an object (when no material has that name and the path is a
+//! folder) and `folder = "FOLDER"` on a material take a texture library's folder of maps,
+//! found by their names ([`crate::library`], docs/SCENES.md).
 //!
 //! # Built-in textures
 //!
@@ -189,6 +197,7 @@ use serde::Deserialize;
 
 use crate::mesh::{MeshLoadError, load_mesh};
 
+mod folder;
 mod maps;
 mod material;
 mod object;
@@ -197,7 +206,7 @@ mod sizes;
 use crate::{Channel, HeightLoadOptions, IoError, load_height_field};
 pub use maps::{NORMAL_Z_TOLERANCE, decode_normal_map, load_color_texture, load_normal_map};
 use object::{is_shape, shape_bytes};
-pub use sizes::{MaterialSizes, ObjectSizes, SceneSizes, scene_sizes, texture_size};
+pub use sizes::{MaterialSizes, ObjectSizes, SceneSizes, scene_sizes, scene_text_sizes, texture_size};
 
 /// The side of a built-in texture when the scene gives no size.
 pub const BUILTIN_SIZE: u32 = 512;
@@ -348,10 +357,15 @@ struct LightFile {
     intensity: Option<f32>,
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, Clone, Default)]
 #[serde(deny_unknown_fields)]
 struct MaterialFile {
     name: Option<String>,
+    /// A texture-library folder whose maps fill in the maps the table leaves out (folder.rs).
+    folder: Option<String>,
+    /// Made for an object whose `material` names a folder: that object, for errors.
+    #[serde(skip)]
+    from_object: Option<String>,
     albedo: Option<String>,
     height: Option<String>,
     depth_map: Option<bool>,
@@ -445,8 +459,9 @@ fn read_scene_text(path: &Path) -> Result<String, SceneError> {
 /// over the size cap of docs/LIMITS.md are refused as unreadable).
 pub fn scene_inputs(path: &Path) -> Result<Vec<PathBuf>, SceneError> {
     let text = read_scene_text(path)?;
-    let parsed: SceneFile = toml::from_str(&text).map_err(|e| syntax_error(path, &text, &e))?;
+    let mut parsed: SceneFile = toml::from_str(&text).map_err(|e| syntax_error(path, &text, &e))?;
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    folder::add_folder_materials(&mut parsed, base);
     let mut files = vec![path.to_owned()];
     let mut add = |value: &str| {
         if !value.trim().is_empty() && !value.starts_with("builtin:") {
@@ -463,6 +478,8 @@ pub fn scene_inputs(path: &Path) -> Result<Vec<PathBuf>, SceneError> {
             meshes.push(base.join(&o.mesh));
         }
     }
+    // The maps of texture-library folders.
+    files.extend(folder::folder_files(&parsed, base));
     // A glTF mesh's external buffers and images.
     for mesh in meshes {
         files.extend(crate::mesh::mesh_references(&mesh));
@@ -499,6 +516,8 @@ pub struct SceneCache {
     albedos: HashMap<Source, Arc<Texture>>,
     normals: HashMap<(PathBuf, bool), Arc<NormalMap>>,
     meshes: HashMap<PathBuf, Arc<Mesh>>,
+    /// Mean roughness of texture-library roughness maps.
+    roughness: HashMap<PathBuf, f32>,
 }
 
 impl SceneCache {
@@ -510,7 +529,7 @@ impl SceneCache {
     /// How many textures and meshes are held.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.heights.len() + self.albedos.len() + self.normals.len() + self.meshes.len()
+        self.heights.len() + self.albedos.len() + self.normals.len() + self.meshes.len() + self.roughness.len()
     }
 
     /// Whether nothing is held.
@@ -530,7 +549,8 @@ pub fn parse_scene_cached(
     base_dir: &Path,
     cache: &mut SceneCache,
 ) -> Result<Scene, SceneError> {
-    let parsed: SceneFile = toml::from_str(text).map_err(|e| syntax_error(file, text, &e))?;
+    let mut parsed: SceneFile = toml::from_str(text).map_err(|e| syntax_error(file, text, &e))?;
+    folder::add_folder_materials(&mut parsed, base_dir);
     let mut loader = Loader { file, base: base_dir, cache };
     loader.scene(parsed)
 }

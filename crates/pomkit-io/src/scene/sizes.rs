@@ -95,6 +95,7 @@ pub fn texture_size(base: &Path, value: &str) -> Option<(u32, u32)> {
 
 impl MaterialSizes {
     pub(super) fn of(base: &Path, m: &MaterialFile) -> Self {
+        let m = &*folder::filled(base, m);
         let size = |v: &Option<String>| v.as_deref().and_then(|v| texture_size(base, v));
         let builtin = |v: &Option<String>| v.as_deref().is_some_and(|v| v.starts_with("builtin:"));
         MaterialSizes {
@@ -134,9 +135,21 @@ fn sizes_of(f: &SceneFile, base: &Path) -> SceneSizes {
 /// [`SceneError::Read`] or [`SceneError::Syntax`], as [`load_scene`] gives them.
 pub fn scene_sizes(path: &Path) -> Result<SceneSizes, SceneError> {
     let text = read_scene_text(path)?;
-    let parsed: SceneFile = toml::from_str(&text).map_err(|e| syntax_error(path, &text, &e))?;
+    let mut parsed: SceneFile = toml::from_str(&text).map_err(|e| syntax_error(path, &text, &e))?;
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    folder::add_folder_materials(&mut parsed, base);
     Ok(sizes_of(&parsed, base))
+}
+
+/// [`scene_sizes`] of scene text (named `file` in errors) whose relative paths are relative to
+/// `base_dir`, as [`parse_scene_named`] reads it.
+///
+/// # Errors
+/// [`SceneError::Syntax`], as [`parse_scene_named`] gives it.
+pub fn scene_text_sizes(text: &str, file: &Path, base_dir: &Path) -> Result<SceneSizes, SceneError> {
+    let mut parsed: SceneFile = toml::from_str(text).map_err(|e| syntax_error(file, text, &e))?;
+    folder::add_folder_materials(&mut parsed, base_dir);
+    Ok(sizes_of(&parsed, base_dir))
 }
 
 impl Loader<'_> {
