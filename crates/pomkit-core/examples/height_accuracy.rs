@@ -28,15 +28,27 @@ fn scale() -> f32 {
     std::env::var("PK_SCALE").ok().and_then(|v| v.parse().ok()).unwrap_or(8.0)
 }
 fn q8(v: Vec<Vec3>) -> Vec<Vec3> {
-    if std::env::var("PK_FLOAT").is_ok() { return v; }
+    if std::env::var("PK_FLOAT").is_ok() {
+        return v;
+    }
     v.into_iter().map(|n| pomkit_core::bake::decode_rgb8(pomkit_core::bake::encode_rgb8(n))).collect()
 }
 
 fn main() {
     let size: u32 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(512);
     let patterns: Vec<Option<Pattern>> = match std::env::args().nth(2) {
-        Some(names) => names.split(',').map(|n| if n == "square" { None } else { Some(n.parse().expect("a pattern name")) }).collect(),
-        None => vec![Some(Pattern::Bricks), Some(Pattern::Cobblestones), Some(Pattern::Pyramids), Some(Pattern::Text), Some(Pattern::Waves), None],
+        Some(names) => names
+            .split(',')
+            .map(|n| if n == "square" { None } else { Some(n.parse().expect("a pattern name")) })
+            .collect(),
+        None => vec![
+            Some(Pattern::Bricks),
+            Some(Pattern::Cobblestones),
+            Some(Pattern::Pyramids),
+            Some(Pattern::Text),
+            Some(Pattern::Waves),
+            None,
+        ],
     };
     println!("| map | case | method | r | RMS error | iterations | seconds |");
     println!("|---|---|---|---|---|---|---|");

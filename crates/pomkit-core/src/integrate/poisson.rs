@@ -264,7 +264,12 @@ mod tests {
                 let zmean = z.iter().map(|&v| f64::from(v)).sum::<f64>() / (w * h) as f64;
                 assert!(zmean.abs() < 1e-4, "{w}x{h} {edges:?}: mean {zmean}");
                 for i in 0..w * h {
-                    assert!((lz[i] - f64::from(b[i])).abs() < 2e-4, "{w}x{h} {edges:?} texel {i}: {} vs {}", lz[i], b[i]);
+                    assert!(
+                        (lz[i] - f64::from(b[i])).abs() < 2e-4,
+                        "{w}x{h} {edges:?} texel {i}: {} vs {}",
+                        lz[i],
+                        b[i]
+                    );
                 }
                 // The same plan solves again with the same answer (scratch reused).
                 let mut again = b.clone();
@@ -276,8 +281,8 @@ mod tests {
 
     #[test]
     fn transpose_of_transpose_is_the_identity() {
-        let (r, c) = (37, 21);
-        let a: Vec<u32> = (0..r * c).collect();
+        let (r, c) = (37usize, 21usize);
+        let a: Vec<usize> = (0..r * c).collect();
         let mut t = vec![0; r * c];
         transpose(&a, &mut t, r, c);
         assert_eq!(t[5 * r + 3], a[3 * c + 5]);
