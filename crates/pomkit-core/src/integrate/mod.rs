@@ -321,6 +321,9 @@ pub fn integrate_normals(
     Ok(Integrated { width, height, heights: z, iterations })
 }
 
+/// A fallible allocation of `n` zeros, named for its error.
+type Alloc<'a> = dyn Fn(&str, usize) -> Result<Vec<f32>, MemoryError> + 'a;
+
 /// The texel grid and its edges.
 struct Grid {
     w: usize,
@@ -543,7 +546,7 @@ impl Grid {
         solver: &mut Poisson,
         max_iterations: u32,
         progress: &(dyn Fn(u64) + Sync),
-        alloc: &dyn Fn(&str, usize) -> Result<Vec<f32>, MemoryError>,
+        alloc: &Alloc<'_>,
     ) -> Result<u32, MemoryError> {
         let n = z.len();
         let mut e =
