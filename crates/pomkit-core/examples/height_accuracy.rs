@@ -1,9 +1,12 @@
 //! The accuracy of `bake height` (docs/ACCURACY.md, "Height from a normal map"): built-in
 //! height maps baked to normals and integrated back, compared with the true heights.
 //!
-//! `cargo run --release -p pomkit-core --example height_accuracy [SIZE]` (default 512) prints
-//! one Markdown table row per map, case and method: Pearson's r and the RMS error, in units of
-//! the map's height range, after the unknown constant is taken out.
+//! `cargo run --release -p pomkit-core --example height_accuracy [SIZE [MAPS [SCALE]]]` (default
+//! 512, every map, 8) prints one Markdown table row per map, case and method: Pearson's r and
+//! the RMS error, in units of the map's height range (heights in [0, 1]), after the unknown
+//! constant is taken out. MAPS is a comma-separated list of built-in names and `square` (a
+//! raised square, its sides from 0.3 to 0.7 of the tile rising over 1/128 of it). The normals
+//! go through RGB8 (as a PNG holds them) at the slope scale SCALE.
 //!
 //! Cases:
 //! - `wrap`: the tile baked by `bake normal` (central differences, `--edges wrap`), integrated
@@ -22,15 +25,14 @@ use pomkit_core::integrate::{IntegrateMethod, IntegrateOptions, integrate_normal
 use pomkit_core::procedural::{Pattern, generate};
 use pomkit_core::{EdgeMode, HeightField};
 
-/// The slope scale the normals are baked at (texel widths of the full height range), as
-/// `bake normal`'s default.
+/// The slope scale the normals are baked at (texel widths of the full height range), the third
+/// argument, `bake normal`'s default 8 without one.
 fn scale() -> f32 {
-    std::env::var("PK_SCALE").ok().and_then(|v| v.parse().ok()).unwrap_or(8.0)
+    std::env::args().nth(3).and_then(|v| v.parse().ok()).unwrap_or(8.0)
 }
+
+/// The normals through RGB8, as `bake normal` writes them to a PNG and `bake height` reads them.
 fn q8(v: Vec<Vec3>) -> Vec<Vec3> {
-    if std::env::var("PK_FLOAT").is_ok() {
-        return v;
-    }
     v.into_iter().map(|n| pomkit_core::bake::decode_rgb8(pomkit_core::bake::encode_rgb8(n))).collect()
 }
 
