@@ -38,7 +38,7 @@ fn q8(v: Vec<Vec3>) -> Vec<Vec3> {
 
 fn main() {
     let size: u32 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(512);
-    let patterns: Vec<Option<Pattern>> = match std::env::args().nth(2) {
+    let patterns: Vec<Option<Pattern>> = match std::env::args().nth(2).filter(|s| !s.is_empty()) {
         Some(names) => names
             .split(',')
             .map(|n| if n == "square" { None } else { Some(n.parse().expect("a pattern name")) })
