@@ -1,4 +1,5 @@
-//! `pomkit bake normal|parallax|pack|maxmip|cone`: maps baked from a height map.
+//! `pomkit bake normal|parallax|pack|maxmip|cone`: maps baked from a height map; `bake height`
+//! (bake_height.rs): a height map integrated from a normal map.
 
 use std::path::{Path, PathBuf};
 
@@ -10,6 +11,7 @@ use pomkit_core::{EdgeMode, HeightField, MaxHeightPyramid};
 use pomkit_io::output::{OutputId, Outputs};
 use pomkit_io::{PixelLayout, Pixels};
 
+use crate::bake_height::{HeightArgs, HeightReadEncoding, MethodArg};
 use crate::batch::{self, BatchArgs};
 use crate::{HeightRead, progress};
 
@@ -29,6 +31,10 @@ pub enum BakeVerb {
     /// the top of each texel footprint as a height, alpha sqrt(cone ratio / shorter side in
     /// texels). Conservative cones, or relaxed ones with --relaxed.
     Cone(ConeArgs),
+    /// Height map integrated from a tangent-space normal map (least squares: an FFT or DCT
+    /// Poisson solve, or a weighted one near steep steps), normalized to [0, 1], with the depth
+    /// the normals imply (height range in texel widths, and as a depth_scale).
+    Height(HeightArgs),
 }
 
 /// The height maps to bake and how to read them.
@@ -224,6 +230,35 @@ pub(crate) enum Kind {
         /// Relaxed cones (`--relaxed`).
         relaxed: bool,
     },
+    /// `bake height`: how the normal map is read and integrated.
+    Height {
+        /// Where z comes from.
+        encoding: HeightReadEncoding,
+        /// The solve.
+        method: MethodArg,
+        /// The weighted solve's iteration bound.
+        iterations: u32,
+    },
+}
+
+/// What one bake made: the map's size and, for `bake height`, the relief the normals imply.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Baked {
+    /// Width in texels.
+    pub(crate) width: u32,
+    /// Height in texels.
+    pub(crate) height: u32,
+    /// `bake height`: the relief.
+    pub(crate) relief: Option<Relief>,
+}
+
+/// The relief integrated from a normal map.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Relief {
+    /// Height range in texel widths.
+    pub(crate) range: f32,
+    /// The range as a depth_scale (UV units: range / width).
+    pub(crate) depth_scale: f32,
 }
 
 impl Kind {
@@ -235,6 +270,7 @@ impl Kind {
             Kind::Pack => "pack",
             Kind::Maxmip => "maxmip",
             Kind::Cone { .. } => "cone",
+            Kind::Height { .. } => "height",
         }
     }
 
@@ -248,6 +284,8 @@ impl Kind {
             Kind::Pack => PixelLayout::Rgba8,
             Kind::Maxmip => PixelLayout::Gray16,
             Kind::Cone { .. } => PixelLayout::GrayAlpha16,
+            // A float EXR when the output's name asks for one (bake_height::layout_for).
+            Kind::Height { .. } => PixelLayout::Gray16,
         }
     }
 
@@ -267,6 +305,7 @@ impl Kind {
             // u16, and the encoder's copy).
             Kind::Maxmip => (format!("the maximum-height pyramid of a {w}x{h} map"), n * 12),
             Kind::Cone { .. } => (format!("the cone map of a {w}x{h} map"), ConeMap::build_bytes(w, h)),
+            Kind::Height { .. } => (format!("the heights of a {w}x{h} normal map"), n * 64),
         }
     }
 
@@ -277,6 +316,34 @@ impl Kind {
 }
 
 pub fn run(verb: &BakeVerb) -> Result<()> {
+    if let BakeVerb::Height(a) = verb {
+        let job = Job {
+            kind: Kind::Height { encoding: a.encoding, method: a.method, iterations: a.iterations },
+            slope: SlopeArgs { scale: 8.0, filter: FilterArg::Central, edges: a.edges },
+            y_down: a.y_down,
+            read: crate::HeightRead { depth_map: false, channel: crate::ChannelArg::Luma, normalize: false },
+        };
+        if batch::is_batch(&a.inputs, &a.batch) {
+            return batch::run(&job, &a.inputs, &a.batch, &a.output);
+        }
+        let baked = bake_file(&job, &a.inputs[0], &a.output, true)?;
+        let (w, h) = (baked.width, baked.height);
+        let opts = crate::bake_height::options(&job);
+        eprintln!(
+            "wrote {} ({w}x{h} height map, {}, {} edges)",
+            a.output.display(),
+            opts.method.name(),
+            opts.edges.name()
+        );
+        if let Some(r) = baked.relief {
+            eprintln!(
+                "relief: {:.4} texel widths from lowest to highest; depth_scale {:.6} (the range over the width, in UV \
+                 units)",
+                r.range, r.depth_scale
+            );
+        }
+        return Ok(());
+    }
     let (job, inputs, output) = match verb {
         BakeVerb::Normal(a) => (
             Job {
@@ -313,11 +380,12 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
             &a.map.input,
             &a.map.output,
         ),
+        BakeVerb::Height(_) => unreachable!("handled above"),
     };
     if batch::is_batch(&inputs.inputs, &inputs.batch) {
         return batch::run(&job, &inputs.inputs, &inputs.batch, output);
     }
-    let (w, h) = bake_file(&job, &inputs.inputs[0], output, true)?;
+    let Baked { width: w, height: h, .. } = bake_file(&job, &inputs.inputs[0], output, true)?;
     match job.kind {
         Kind::Normal(encoding) => {
             eprintln!("wrote {} ({w}x{h} normal map, {encoding:?}, scale {})", output.display(), job.slope.scale);
@@ -329,6 +397,7 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
             let kind = if relaxed { "relaxed" } else { "conservative" };
             eprintln!("wrote {} ({w}x{h} {kind} cone map)", output.display());
         }
+        Kind::Height { .. } => {}
     }
     Ok(())
 }
@@ -406,7 +475,10 @@ fn output_buffer<T: Clone>(value: T, n: usize, input: &Path) -> Result<Vec<T>> {
 
 /// Bakes `job` from the height map `input` into `output`, atomically; `bars` shows progress
 /// bars for big maps (single mode; a batch shows its own). Returns the map's size.
-pub(crate) fn bake_file(job: &Job, input: &Path, output: &Path, bars: bool) -> Result<(u32, u32)> {
+pub(crate) fn bake_file(job: &Job, input: &Path, output: &Path, bars: bool) -> Result<Baked> {
+    if let Kind::Height { .. } = job.kind {
+        return crate::bake_height::bake_height_file(job, input, output, bars);
+    }
     let opts = job.slope.options(job.y_down);
     let layout = job.kind.layout();
     let (field, mut outs, id) = prepare(input, &job.read, &opts, output, job.kind)?;
@@ -485,7 +557,8 @@ pub(crate) fn bake_file(job: &Job, input: &Path, output: &Path, bars: bool) -> R
             pb.finish_and_clear();
             outs.write_image(id, w, h, layout, Pixels::U16(&cones.to_gray_alpha16()))?;
         }
+        Kind::Height { .. } => unreachable!("bake_height_file"),
     }
     outs.commit()?;
-    Ok((w, h))
+    Ok(Baked { width: w, height: h, relief: None })
 }

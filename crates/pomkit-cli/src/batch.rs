@@ -24,7 +24,8 @@ use pomkit_core::memory::{Budget, MemoryError};
 use pomkit_io::output::{FileKey, Outputs, regular_file_key};
 
 use crate::ChannelArg;
-use crate::bake::{EdgesArg, FilterArg, Job, Kind, NormalEncoding, ParallaxEncoding};
+use crate::bake::{Baked, EdgesArg, FilterArg, Job, Kind, NormalEncoding, ParallaxEncoding};
+use crate::bake_height::HeightReadEncoding;
 
 /// Extensions of the files a folder input contributes (compared without case).
 pub(crate) const IMAGE_EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "tif", "tiff", "exr"];
@@ -37,7 +38,8 @@ pub struct BatchArgs {
     recursive: bool,
     /// Output file name in a batch: {stem} (the input's name without its extension), {name}
     /// (its whole name) and {ext} (png, or exr for float encodings). Default
-    /// '{stem}_normal.{ext}', '{stem}_parallax.{ext}' or '{stem}_packed.{ext}'.
+    /// '{stem}_normal.{ext}', '{stem}_parallax.{ext}', '{stem}_packed.{ext}', '{stem}_maxmip.{ext}',
+    /// '{stem}_cone.{ext}' or '{stem}_height.{ext}' ('{stem}_height.exr' writes float heights).
     #[arg(long, value_name = "TEMPLATE")]
     name: Option<String>,
     /// Bake outputs that exist already (a batch skips them otherwise, so that a rerun only
@@ -112,8 +114,8 @@ struct Item {
 /// What happened to one file.
 #[derive(Debug, Clone)]
 enum Status {
-    /// Baked; its size, when known.
-    Baked(Option<(u32, u32)>),
+    /// Baked; its size (and, for `bake height`, the relief), when known.
+    Baked(Option<Baked>),
     Skipped,
     Failed(String),
     /// Not baked: the batch was stopped by a signal first.
@@ -329,7 +331,7 @@ pub(crate) fn run(job: &Job, inputs: &[PathBuf], args: &BatchArgs, out: &Path) -
                         Status::Skipped
                     } else {
                         let job = &jobs_per_file[i];
-                        match gate.admit(estimate(job.kind, item), || describe(item)) {
+                        match gate.admit(estimate(job, item), || describe(item)) {
                             Err(e) => Status::Failed(format!("{e:#}")),
                             Ok(ticket) => {
                                 shared.set(i, Progress::Running { since: t0, before: regular_file_key(output) });
@@ -460,7 +462,7 @@ enum Place {
 
 /// Bakes one file, turning an error (or a panic) into its reason.
 fn bake_one(job: &Job, item: &Item, output: &Path) -> Status {
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> Result<(u32, u32)> {
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> Result<Baked> {
         if let Some(parent) = output.parent() {
             std::fs::create_dir_all(parent)
                 .with_context(|| format!("cannot create the folder {}", parent.display()))?;
@@ -468,7 +470,7 @@ fn bake_one(job: &Job, item: &Item, output: &Path) -> Status {
         crate::bake::bake_file(job, &item.input, output, false)
     }));
     match result {
-        Ok(Ok(size)) => Status::Baked(Some(size)),
+        Ok(Ok(baked)) => Status::Baked(Some(baked)),
         Ok(Err(e)) => Status::Failed(format!("{e:#}")),
         Err(_) => Status::Failed("internal error: the bake panicked (please report this)".into()),
     }
@@ -496,6 +498,7 @@ fn default_template(kind: Kind) -> &'static str {
         Kind::Pack => "{stem}_packed.{ext}",
         Kind::Maxmip => "{stem}_maxmip.{ext}",
         Kind::Cone { .. } => "{stem}_cone.{ext}",
+        Kind::Height { .. } => "{stem}_height.{ext}",
     }
 }
 
@@ -521,8 +524,9 @@ fn dimensions(item: &Item) -> Option<(u32, u32, u64)> {
 /// maximum-height pyramid and its atlas, as `bake maxmip` checks; the texels and the encoder's
 /// copy of them for the others). A file whose size cannot be told from its header counts as
 /// its length.
-fn estimate(kind: Kind, item: &Item) -> u64 {
+fn estimate(job: &Job, item: &Item) -> u64 {
     let Some((w, h, decoded)) = dimensions(item) else { return item.bytes.unwrap_or(0) };
+    let kind = job.kind;
     let texels = u64::from(w) * u64::from(h);
     let map = match kind {
         Kind::Cone { .. } => ConeMap::build_bytes(w, h),
@@ -532,6 +536,10 @@ fn estimate(kind: Kind, item: &Item) -> u64 {
         Kind::Parallax(ParallaxEncoding::Float) => texels * 8,
         // The normals, then the RGBA texels and the encoder's copy.
         Kind::Pack => texels * 20,
+        // The normals, the solve and the output (no height field: less its 8 bytes a texel).
+        Kind::Height { .. } => {
+            crate::bake_height::bytes(&crate::bake_height::options(job), w, h).saturating_sub(texels * 8)
+        }
     };
     decoded.saturating_add(texels * 8).saturating_add(map)
 }
@@ -892,6 +900,11 @@ impl Rules {
                             job.kind = Kind::Parallax(v);
                         }
                     }
+                    Kind::Height { method, iterations, .. } => {
+                        if let Ok(v) = HeightReadEncoding::from_str(e, true) {
+                            job.kind = Kind::Height { encoding: v, method, iterations };
+                        }
+                    }
                     Kind::Pack | Kind::Maxmip | Kind::Cone { .. } => {}
                 }
             }
@@ -928,8 +941,8 @@ fn report(
         .zip(outcomes)
         .zip(&shared.outputs)
         .map(|((item, o), output)| {
-            let (status, size, error) = match &o.status {
-                Status::Baked(size) => ("baked", *size, None),
+            let (status, baked, error) = match &o.status {
+                Status::Baked(baked) => ("baked", *baked, None),
                 Status::Skipped => ("skipped", None, None),
                 Status::Failed(reason) => ("failed", None, Some(reason.clone())),
                 Status::Interrupted => ("interrupted", None, None),
@@ -941,16 +954,23 @@ fn report(
             } else {
                 Vec::new()
             };
-            serde_json::json!({
+            let mut entry = serde_json::json!({
                 "input": item.input.to_string_lossy(),
                 "outputs": outputs,
                 "status": status,
                 "bytes": item.bytes,
-                "width": size.map(|s| s.0),
-                "height": size.map(|s| s.1),
+                "width": baked.map(|b| b.width),
+                "height": baked.map(|b| b.height),
                 "seconds": o.seconds,
                 "error": error,
-            })
+            });
+            // `bake height`: the relief the normals imply (null when not baked).
+            if let (Kind::Height { .. }, Some(map)) = (shared.kind, entry.as_object_mut()) {
+                let relief = baked.and_then(|b| b.relief);
+                map.insert("range_texels".into(), serde_json::json!(relief.map(|r| r.range)));
+                map.insert("depth_scale".into(), serde_json::json!(relief.map(|r| r.depth_scale)));
+            }
+            entry
         })
         .collect();
     serde_json::json!({

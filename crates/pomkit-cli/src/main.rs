@@ -3,6 +3,7 @@
 
 mod backend;
 mod bake;
+mod bake_height;
 mod batch;
 mod bench;
 mod compare;
@@ -35,7 +36,8 @@ struct Cli {
 enum Verb {
     /// Render a scene (or, with none, the built-in demo scene) to a PNG, on the GPU or the CPU.
     Render(render::RenderArgs),
-    /// Bake normal, parallax or packed maps from a height map.
+    /// Bake normal, parallax, packed, maximum-height or cone maps from a height map, or a height
+    /// map from a normal map (normal, parallax, pack, maxmip, cone, height).
     #[command(subcommand)]
     Bake(bake::BakeVerb),
     /// Write one of the built-in procedural height maps (and optionally its colour map).

@@ -38,6 +38,7 @@ pub mod compose;
 pub mod cone;
 pub mod demo;
 pub mod heightfield;
+pub mod integrate;
 pub mod memory;
 pub mod mesh;
 pub mod params;

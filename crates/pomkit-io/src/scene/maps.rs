@@ -101,11 +101,40 @@ fn checked_normal(n: Vec3, path: &Path, x: u32, y: u32) -> Result<Vec3, IoError>
     Ok(Vec3::new(n.x, n.y, n.z.max(0.0)).normalize_or(Vec3::Z))
 }
 
+/// Where a normal map's `z` comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum NormalZ {
+    /// As [`load_normal_map`] decides: rebuilt from x and y when an 8- or 16-bit map's blue is
+    /// zero everywhere (a two-channel map), stored otherwise.
+    #[default]
+    Auto,
+    /// Rebuilt from x and y (Lengyel eq. 7.44) whatever the blue channel holds: a two-channel
+    /// (`rg8`) map whose blue carries something else.
+    Rebuilt,
+}
+
+/// [`load_normal_map`] with the choice of where `z` comes from.
+///
+/// # Errors
+/// As [`load_normal_map`].
+pub fn load_normal_map_with(path: &Path, y_down: bool, z: NormalZ) -> Result<NormalMap, IoError> {
+    let bytes = crate::read::read_image_file(path)?;
+    decode_normal_map_with(&bytes, path, y_down, z)
+}
+
 /// [`load_normal_map`] from the bytes of an image file; `path` names it in errors.
 ///
 /// # Errors
 /// As [`load_normal_map`], but for [`IoError::Read`].
 pub fn decode_normal_map(bytes: &[u8], path: &Path, y_down: bool) -> Result<NormalMap, IoError> {
+    decode_normal_map_with(bytes, path, y_down, NormalZ::Auto)
+}
+
+/// [`decode_normal_map`] with the choice of where `z` comes from.
+///
+/// # Errors
+/// As [`decode_normal_map`].
+pub fn decode_normal_map_with(bytes: &[u8], path: &Path, y_down: bool, z: NormalZ) -> Result<NormalMap, IoError> {
     let img = decode_image(bytes, path)?;
     if !img.color().has_color() {
         return Err(IoError::UnsupportedPixels {
@@ -116,7 +145,7 @@ pub fn decode_normal_map(bytes: &[u8], path: &Path, y_down: bool) -> Result<Norm
     let (w, h) = (img.width(), img.height());
     let float = is_float(&img);
     let rgb = img.to_rgb32f();
-    let two_channel = !float && rgb.pixels().all(|p| p.0[2] == 0.0);
+    let two_channel = z == NormalZ::Rebuilt || (!float && rgb.pixels().all(|p| p.0[2] == 0.0));
     let mut normals = Vec::with_capacity(w as usize * h as usize);
     for (x, y, p) in rgb.enumerate_pixels() {
         let [nx, ny, nz] = if float { p.0 } else { p.0.map(|c| c * 2.0 - 1.0) };

@@ -204,7 +204,10 @@ mod object;
 mod sizes;
 
 use crate::{Channel, HeightLoadOptions, IoError, load_height_field};
-pub use maps::{NORMAL_Z_TOLERANCE, decode_normal_map, load_color_texture, load_normal_map};
+pub use maps::{
+    NORMAL_Z_TOLERANCE, NormalZ, decode_normal_map, decode_normal_map_with, load_color_texture, load_normal_map,
+    load_normal_map_with,
+};
 use object::{is_shape, shape_bytes};
 pub use sizes::{MaterialSizes, ObjectSizes, SceneSizes, scene_sizes, scene_text_sizes, texture_size};
 
