@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use crate::IoError;
 use crate::output::Outputs;
 
+pub(crate) mod import;
 mod sample;
 
 pub use sample::{SampleCamera, SampleDisplacement, SampleLight, SampleOptions, write_sample};
