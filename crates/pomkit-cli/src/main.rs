@@ -6,6 +6,7 @@ mod bake;
 mod batch;
 mod bench;
 mod compare;
+mod gltf;
 mod interrupt;
 mod output;
 mod progress;
@@ -47,6 +48,9 @@ enum Verb {
     Bench(bench::BenchArgs),
     /// The interactive viewer: tune a height map and its technique on the GPU renderer.
     View(ViewArgs),
+    /// glTF files: `attach` puts a height map into a material (KHR_materials_displacement).
+    #[command(subcommand)]
+    Gltf(gltf::GltfVerb),
 }
 
 /// `pomkit view [SCENE] [--screenshot OUT.png]`.
@@ -350,6 +354,7 @@ fn main() -> ExitCode {
         Verb::Compare(args) => compare::run(args),
         Verb::Bench(args) => bench::run(args),
         Verb::View(args) => view(args),
+        Verb::Gltf(verb) => gltf::run(verb),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -174,3 +174,106 @@ fn bad_gltf_input_fails_naming_the_file_and_item_with_no_output() {
     assert!(!o.status.success());
     assert_eq!(std::fs::read(dir.path().join("sample_albedo.png")).unwrap(), before);
 }
+
+fn json_of(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+#[test]
+fn attach_round_trips_a_gltf_into_another_folder_and_render_traces_it() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("in")).unwrap();
+    std::fs::create_dir(dir.path().join("out")).unwrap();
+    let plain = SampleOptions { name: "plain".into(), ..grazing(None) };
+    write_sample(&dir.path().join("in"), &plain).unwrap();
+    let o = pomkit(
+        &["gltf", "attach", "in/plain.gltf", "--height", "builtin:bricks:64x64", "--depth", "0.2", "-o", "out/a.gltf"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json = json_of(&dir.path().join("out/a.gltf"));
+    let ext = &json["materials"][0]["extensions"]["KHR_materials_displacement"];
+    assert_eq!(ext["displacementGeometryFactor"].as_f64().unwrap() as f32, 0.2);
+    assert_eq!(ext["displacementGeometryOffset"].as_f64().unwrap() as f32, -0.2);
+    assert!(json["extensionsUsed"].as_array().unwrap().iter().any(|e| e == "KHR_materials_displacement"));
+    assert!(json.get("extensionsRequired").is_none());
+    assert_eq!(json["buffers"][0]["uri"], "../in/plain.bin");
+    assert!(dir.path().join("out/a_height.png").exists());
+    // The scene of the output: traced at depth 0.2 over a UV unit of 2, the built-in heights.
+    let scene = pomkit_io::load_scene(&dir.path().join("out/a.gltf")).unwrap();
+    let m = &scene.materials[0];
+    assert!((m.depth_scale - 0.1).abs() < 1e-6, "{}", m.depth_scale);
+    let truth = pomkit_core::procedural::generate(pomkit_core::procedural::Pattern::Bricks, 64, 64);
+    for (a, b) in m.height.as_ref().unwrap().heights().iter().zip(truth.heights()) {
+        assert!((a - b).abs() <= 1.0 / 65535.0, "{a} vs {b}");
+    }
+    // It renders as the same plane written with the extension in the first place.
+    let attached = render(dir.path(), &dir.path().join("out/a.gltf"), "attached.png", &[]);
+    let made = write_sample(dir.path(), &grazing(Some(SampleDisplacement { factor: 0.2, offset: -0.2 }))).unwrap();
+    let direct = render(dir.path(), &made, "direct.png", &[]);
+    let normal = render(dir.path(), &made, "normal.png", &["--technique", "normal"]);
+    let (same, apart) = (mad(&attached, &direct), mad(&normal, &direct));
+    assert!(same < 0.2 * apart, "attached vs direct {same:.3}, normal vs direct {apart:.3}");
+}
+
+#[test]
+fn attach_writes_a_glb_with_the_image_inside_and_converts_depth_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = SampleOptions { name: "plain".into(), binary: true, displacement: None, ..SampleOptions::default() };
+    write_sample(dir.path(), &opts).unwrap();
+    let o = pomkit(
+        &["gltf", "attach", "plain.glb", "--height", "builtin:waves:32x32", "--depth-scale", "0.05", "-o", "b.glb"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    names.sort();
+    assert_eq!(names, ["b.glb", "plain.glb"]);
+    let scene = pomkit_io::load_scene(&dir.path().join("b.glb")).unwrap();
+    // 0.05 UV units over a UV unit of 2: a factor of 0.1, back to 0.05.
+    assert!((scene.materials[0].depth_scale - 0.05).abs() < 1e-6);
+    assert_eq!(scene.materials[0].height.as_ref().unwrap().width(), 32);
+    assert!(stderr(&o).contains("factor 0.1"), "{}", stderr(&o));
+}
+
+#[test]
+fn attach_refuses_bad_input_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sample(dir.path(), &SampleOptions { displacement: None, ..SampleOptions::default() }).unwrap();
+    let before = std::fs::read(dir.path().join("sample.gltf")).unwrap();
+    let h = ["--height", "builtin:bricks:16x16"];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["--depth", "0.1", "-o", "sample.gltf"], "sample.gltf"),
+        (vec!["--depth", "0.1", "-o", "x.glb"], "format"),
+        (vec!["--depth=-1", "-o", "x.gltf"], "--depth"),
+        (vec!["--depth", "NaN", "-o", "x.gltf"], "--depth"),
+        (vec!["-o", "x.gltf"], "--depth"),
+        (vec!["--depth", "0.1", "--material", "Stone", "-o", "x.gltf"], "\"Stone\""),
+        (vec!["--depth", "0.1", "--material", "3", "-o", "x.gltf"], "material 3"),
+    ];
+    for (extra, expected) in cases {
+        let mut args = vec!["gltf", "attach", "sample.gltf"];
+        args.extend_from_slice(&h);
+        args.extend_from_slice(&extra);
+        let o = pomkit(&args, dir.path());
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains(expected) && !e.contains("panicked"), "{args:?}: {e}");
+        assert!(!dir.path().join("x.gltf").exists() && !dir.path().join("x_height.png").exists());
+    }
+    // The height image beside the output may not overwrite the height map read.
+    std::fs::copy(dir.path().join("sample_albedo.png"), dir.path().join("y_height.png")).unwrap();
+    let h_before = std::fs::read(dir.path().join("y_height.png")).unwrap();
+    let o = pomkit(
+        &["gltf", "attach", "sample.gltf", "--height", "y_height.png", "--depth", "0.1", "-o", "y.gltf"],
+        dir.path(),
+    );
+    assert!(!o.status.success() && stderr(&o).contains("y_height.png"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(dir.path().join("y_height.png")).unwrap(), h_before);
+    assert!(!dir.path().join("y.gltf").exists());
+    let o = pomkit(
+        &["gltf", "attach", "sample.gltf", "--height", "sample_albedo.png", "--depth", "0.1", "-o", "x.gltf"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "a file's own image may be the height: {}", stderr(&o));
+    assert_eq!(std::fs::read(dir.path().join("sample.gltf")).unwrap(), before);
+}

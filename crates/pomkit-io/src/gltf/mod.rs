@@ -3,15 +3,21 @@
 //! - [`write_sample`]: a small asset made from pomkit's built-in maps (a plane with base
 //!   colour, normal and, optionally, `KHR_materials_displacement` textures), for tests and
 //!   demonstrations.
+//! - [`attach`]: a height map put into a material of a glTF file as
+//!   `KHR_materials_displacement` (`pomkit gltf attach`).
+//! - glTF files as scenes: `gltf = "FILE"` in a scene file, or a `.gltf`/`.glb` path given to
+//!   [`crate::scene::load_scene`] (docs/SCENES.md, glTF files).
 
 use std::path::PathBuf;
 
 use crate::IoError;
 use crate::output::Outputs;
 
+mod attach;
 pub(crate) mod import;
 mod sample;
 
+pub use attach::{AttachDepth, AttachError, Attached, MaterialChoice, attach};
 pub use sample::{SampleCamera, SampleDisplacement, SampleLight, SampleOptions, write_sample};
 
 /// The name of the (draft) glTF extension that carries a material's height map:
