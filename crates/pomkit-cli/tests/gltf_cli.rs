@@ -121,6 +121,9 @@ fn the_file_camera_node_transform_and_point_light_are_used() {
     assert!(stderr(&o).contains("3072 of 3072 pixels covered"), "{}", stderr(&o));
 }
 
+/// A change made to a glTF file's JSON.
+type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+
 #[test]
 fn bad_gltf_input_fails_naming_the_file_and_item_with_no_output() {
     let dir = tempfile::tempdir().unwrap();
@@ -131,8 +134,8 @@ fn bad_gltf_input_fails_naming_the_file_and_item_with_no_output() {
         change(&mut json);
         std::fs::write(&file, serde_json::to_vec(&json).unwrap()).unwrap();
     };
-    let ext = "KHR_materials_displacement";
-    let cases: Vec<(Box<dyn Fn(&mut serde_json::Value)>, Vec<&str>)> = vec![
+    const EXT: &str = "KHR_materials_displacement";
+    let cases: Vec<(Edit, Vec<&str>)> = vec![
         (Box::new(|j| j["images"][1]["uri"] = "missing.png".into()), vec!["normalTexture", "missing.png"]),
         (Box::new(|j| j["buffers"][0]["uri"] = "missing.bin".into()), vec!["missing.bin"]),
         (
@@ -140,11 +143,11 @@ fn bad_gltf_input_fails_naming_the_file_and_item_with_no_output() {
             vec!["material 0 'Bricks'", "displacementGeometryTexture", "sample.bin"],
         ),
         (
-            Box::new(|j| j["materials"][0]["extensions"][ext]["displacementGeometryFactor"] = (-1.0).into()),
+            Box::new(|j| j["materials"][0]["extensions"][EXT]["displacementGeometryFactor"] = (-1.0).into()),
             vec!["material 0 'Bricks'", "displacementGeometryFactor is -1"],
         ),
         (
-            Box::new(|j| j["materials"][0]["extensions"][ext]["displacementGeometryFactor"] = "NaN".into()),
+            Box::new(|j| j["materials"][0]["extensions"][EXT]["displacementGeometryFactor"] = "NaN".into()),
             vec!["material 0 'Bricks'", "displacementGeometryFactor"],
         ),
         (

@@ -591,6 +591,9 @@ position = [0.0, 0.0, -3.0]
         assert!((scene.materials[0].depth_scale - 0.05).abs() < 1e-6);
     }
 
+    /// A change made to a glTF file's JSON.
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+
     #[test]
     fn bad_gltf_input_is_refused_naming_the_file_and_the_item() {
         let dir = tempfile::tempdir().unwrap();
@@ -599,7 +602,7 @@ position = [0.0, 0.0, -3.0]
             &mut j["materials"][0]["extensions"][crate::gltf::DISPLACEMENT_EXTENSION]
         }
         let original = std::fs::read(&path).unwrap();
-        let cases: Vec<(Box<dyn Fn(&mut serde_json::Value)>, &[&str])> = vec![
+        let cases: Vec<(Edit, &[&str])> = vec![
             (
                 Box::new(|j| ext(j)["displacementGeometryFactor"] = serde_json::json!(-0.1)),
                 &["material 0 'Bricks'", "displacementGeometryFactor is -0.1"],
