@@ -7,6 +7,7 @@ mod bake_height;
 mod batch;
 mod bench;
 mod compare;
+mod gltf;
 mod interrupt;
 mod library;
 mod output;
@@ -50,6 +51,9 @@ enum Verb {
     Bench(bench::BenchArgs),
     /// The interactive viewer: tune a height map and its technique on the GPU renderer.
     View(ViewArgs),
+    /// glTF files: `attach` puts a height map into a material (KHR_materials_displacement).
+    #[command(subcommand)]
+    Gltf(gltf::GltfVerb),
 }
 
 /// `pomkit view [SCENE] [--screenshot OUT.png]`.
@@ -362,6 +366,7 @@ fn main() -> ExitCode {
         Verb::Compare(args) => compare::run(args),
         Verb::Bench(args) => bench::run(args),
         Verb::View(args) => view(args),
+        Verb::Gltf(verb) => gltf::run(verb),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -18,8 +18,10 @@ use crate::progress;
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// Scene file (TOML; see docs/SCENES.md). Without one, the built-in demo scene: bricks,
-    /// pyramids, cobblestones and raised text on a plane, a cube and a sphere.
+    /// Scene file (TOML; see docs/SCENES.md), or a glTF file (.gltf, .glb: its scene, camera,
+    /// lights and materials; a material with KHR_materials_displacement is traced). Without
+    /// one, the built-in demo scene: bricks, pyramids, cobblestones and raised text on a plane,
+    /// a cube and a sphere.
     scene: Option<PathBuf>,
     /// Output PNG. AOVs go beside it as OUT.NAME.exr. Every output appears only when the whole
     /// run succeeds, may not be a file the scene reads, and may not be read-only; a symbolic
@@ -163,7 +165,14 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         // not look like a hang.
         Some(path) => {
             let work = pomkit_io::scene::scene_sizes(path).map_or(0, |s| scene_work(&s));
-            progress::spinner(work, &format!("loading {}", path.display()), || pomkit_io::scene::load_scene(path))?
+            let mut warnings = Vec::new();
+            let scene = progress::spinner(work, &format!("loading {}", path.display()), || {
+                pomkit_io::scene::load_scene_warned(path, &mut warnings)
+            })?;
+            for w in warnings {
+                eprintln!("warning: {w}");
+            }
+            scene
         }
         None => match &folder {
             Some(f) => f.load()?,

@@ -42,7 +42,7 @@ use pomkit_core::mesh::{Mesh, MeshError};
 use pomkit_core::{TangentMethod, TangentOptions, compute_tangents};
 
 /// The deepest node hierarchy followed in a glTF file (deeper ones, or cycles, are an error).
-const MAX_NODE_DEPTH: usize = 256;
+pub(crate) const MAX_NODE_DEPTH: usize = 256;
 
 /// Why a mesh file could not be loaded. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -157,7 +157,7 @@ pub fn mesh_references(path: &Path) -> Vec<PathBuf> {
 
 /// The file a glTF URI names, as the glTF reader resolves it: `file:` URIs as they are, other
 /// schemes (`data:`, `http:`) none, relative ones percent-decoded against `base`.
-fn uri_path(uri: &str, base: &Path) -> Option<PathBuf> {
+pub(crate) fn uri_path(uri: &str, base: &Path) -> Option<PathBuf> {
     if uri.contains(':') {
         let rest = uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:"))?;
         return Some(PathBuf::from(rest));
@@ -359,7 +359,7 @@ fn check_obj_indices(bytes: &[u8], path: &Path) -> Result<(), MeshLoadError> {
 // ---------------------------------------------------------------------------------------------
 
 /// One primitive's vertices, already in world (file) space.
-struct Part {
+pub(crate) struct Part {
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     uvs: Vec<Vec2>,
@@ -397,7 +397,17 @@ fn check_buffer_sizes(document: &gltf::Document, base: &Path) -> Result<(), Stri
     Ok(())
 }
 
-fn parse_gltf(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
+/// A parsed and validated glTF file with its buffers loaded (the blob of a `.glb` is buffer 0).
+pub(crate) struct OpenGltf {
+    /// The document.
+    pub(crate) document: gltf::Document,
+    /// Each buffer's bytes, by index.
+    pub(crate) buffers: Vec<gltf::buffer::Data>,
+}
+
+/// Parses a `.gltf` or `.glb` file's bytes and loads its buffers (external ones from `path`'s
+/// folder), with the checks that keep the glTF reader from panicking or reading too much.
+pub(crate) fn open_gltf(bytes: &[u8], path: &Path) -> Result<OpenGltf, MeshLoadError> {
     let gltf_err = |reason: String| MeshLoadError::Gltf { path: path.to_owned(), reason };
     // gltf 1.4.1 takes the 12-byte header off a GLB's declared length unchecked (an overflow,
     // found by the `gltf` fuzz target, docs/FUZZING.md).
@@ -430,7 +440,12 @@ fn parse_gltf(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
             gltf_err(format!("cannot load its buffers ({}): {e}", files.join(", ")))
         }
     })?;
+    Ok(OpenGltf { document, buffers })
+}
 
+fn parse_gltf(bytes: &[u8], path: &Path) -> Result<Raw, MeshLoadError> {
+    let gltf_err = |reason: String| MeshLoadError::Gltf { path: path.to_owned(), reason };
+    let OpenGltf { document, buffers } = open_gltf(bytes, path)?;
     // (mesh, world transform) for every mesh instance.
     let mut instances: Vec<(gltf::Mesh<'_>, Mat4)> = Vec::new();
     match document.default_scene().or_else(|| document.scenes().next()) {
@@ -480,7 +495,7 @@ fn check_attribute_accessors(json: &gltf::json::Root) -> Result<(), String> {
 }
 
 /// `mesh "name", primitive 2` (or `mesh 0, primitive 2` for an unnamed mesh), for messages.
-fn where_in(mesh: &gltf::Mesh<'_>, prim: usize) -> String {
+pub(crate) fn where_in(mesh: &gltf::Mesh<'_>, prim: usize) -> String {
     match mesh.name() {
         Some(name) => format!("mesh {name:?}, primitive {prim}"),
         None => format!("mesh {}, primitive {prim}", mesh.index()),
@@ -495,6 +510,33 @@ fn read_primitive(
     buffers: &[gltf::buffer::Data],
     path: &Path,
 ) -> Result<Option<Part>, MeshLoadError> {
+    match read_local(prim, mesh, buffers, path)? {
+        Some(local) => place(local, prim, mesh, world, path).map(Some),
+        None => Ok(None),
+    }
+}
+
+/// One primitive's vertices as the file stores them (the mesh's own space).
+pub(crate) struct LocalPart {
+    /// Positions.
+    pub(crate) positions: Vec<Vec3>,
+    /// Normals, when the primitive has them.
+    pub(crate) normals: Option<Vec<Vec3>>,
+    /// `TEXCOORD_0`.
+    pub(crate) uvs: Vec<Vec2>,
+    /// Tangents, when the primitive has them and normals.
+    pub(crate) tangents: Option<Vec<Vec4>>,
+    /// The triangle list.
+    pub(crate) indices: Vec<u32>,
+}
+
+/// Reads one primitive in the mesh's own space; `None` for points and lines.
+pub(crate) fn read_local(
+    prim: &gltf::Primitive<'_>,
+    mesh: &gltf::Mesh<'_>,
+    buffers: &[gltf::buffer::Data],
+    path: &Path,
+) -> Result<Option<LocalPart>, MeshLoadError> {
     use gltf::mesh::Mode;
     let invalid = |what: String| MeshLoadError::Invalid {
         path: path.to_owned(),
@@ -543,8 +585,23 @@ fn read_primitive(
     if let Some(&bad) = listed.iter().find(|&&i| i as usize >= n) {
         return Err(invalid(format!("index {bad} refers past its {n} vertices")));
     }
-    let mut indices = triangle_list(&listed, mode);
+    let indices = triangle_list(&listed, mode);
+    Ok(Some(LocalPart { positions, normals, uvs, tangents, indices }))
+}
 
+/// Moves a primitive read by [`read_local`] to world space by its node's `world` transform.
+pub(crate) fn place(
+    local: LocalPart,
+    prim: &gltf::Primitive<'_>,
+    mesh: &gltf::Mesh<'_>,
+    world: Mat4,
+    path: &Path,
+) -> Result<Part, MeshLoadError> {
+    let invalid = |what: String| MeshLoadError::Invalid {
+        path: path.to_owned(),
+        message: format!("{}: {what}", where_in(mesh, prim.index())),
+    };
+    let LocalPart { positions, normals, uvs, tangents, mut indices } = local;
     // To world space: normals by the inverse transpose, tangents by the matrix itself; a
     // mirroring transform flips the winding (glTF 3.7.4) and the tangents' handedness.
     let m3 = Mat3::from_mat4(world);
@@ -572,7 +629,7 @@ fn read_primitive(
         Some(normals) => Part { positions, normals, uvs, tangents, indices },
         None => flat_part(&positions, &uvs, &indices),
     };
-    Ok(Some(part))
+    Ok(part)
 }
 
 /// Checks that every accessor of the primitive (its indices and attributes) lies inside its
@@ -719,4 +776,10 @@ fn merge_parts(parts: Vec<Part>, path: &Path) -> Result<Raw, MeshLoadError> {
         }
     }
     Ok(raw)
+}
+
+/// One primitive placed by [`place`] as a [`Mesh`] (its tangents kept when the file gives them,
+/// else MikkTSpace).
+pub(crate) fn part_mesh(part: Part, path: &Path) -> Result<Mesh, MeshLoadError> {
+    merge_parts(vec![part], path)?.into_mesh(path)
 }

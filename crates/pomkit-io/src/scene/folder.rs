@@ -19,7 +19,7 @@ pub(super) fn add_folder_materials(f: &mut SceneFile, base: &Path) {
         .map(|(i, m)| m.name.clone().unwrap_or_else(|| format!("material {}", i + 1)))
         .collect();
     for (i, o) in f.object.iter().enumerate() {
-        let value = &o.material;
+        let Some(value) = &o.material else { continue };
         if value.trim().is_empty() || value.contains('\0') || names.contains(value) {
             continue;
         }

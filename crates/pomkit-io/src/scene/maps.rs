@@ -31,6 +31,18 @@ fn is_float(img: &DynamicImage) -> bool {
 /// [`IoError::Read`], [`IoError::Decode`] or [`IoError::Empty`], naming `path`.
 pub fn load_color_texture(path: &Path) -> Result<Texture, IoError> {
     let img = open_image(path)?;
+    color_texture(img, path)
+}
+
+/// [`load_color_texture`] from the bytes of an image file; `path` names it in errors.
+///
+/// # Errors
+/// As [`load_color_texture`], but for [`IoError::Read`].
+pub fn decode_color_texture(bytes: &[u8], path: &Path) -> Result<Texture, IoError> {
+    color_texture(decode_image(bytes, path)?, path)
+}
+
+fn color_texture(img: DynamicImage, path: &Path) -> Result<Texture, IoError> {
     let (w, h) = (img.width(), img.height());
     let texture = match &img {
         DynamicImage::ImageLuma8(_)

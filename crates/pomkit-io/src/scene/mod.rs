@@ -198,6 +198,7 @@ use serde::Deserialize;
 use crate::mesh::{MeshLoadError, load_mesh};
 
 mod folder;
+mod gltf;
 mod maps;
 mod material;
 mod object;
@@ -205,8 +206,8 @@ mod sizes;
 
 use crate::{Channel, HeightLoadOptions, IoError, load_height_field};
 pub use maps::{
-    NORMAL_Z_TOLERANCE, NormalZ, decode_normal_map, decode_normal_map_with, load_color_texture, load_normal_map,
-    load_normal_map_with,
+    NORMAL_Z_TOLERANCE, NormalZ, decode_color_texture, decode_normal_map, decode_normal_map_with, load_color_texture,
+    load_normal_map, load_normal_map_with,
 };
 use object::{is_shape, shape_bytes};
 pub use sizes::{MaterialSizes, ObjectSizes, SceneSizes, scene_sizes, scene_text_sizes, texture_size};
@@ -282,6 +283,32 @@ pub enum SceneError {
         /// Why the mesh failed; it names the mesh file.
         cause: Box<MeshLoadError>,
     },
+    /// The glTF file the scene imports (`gltf = ...`, or the glTF file rendered itself) could
+    /// not be read, or an item of it (a material, a texture, a camera) is invalid.
+    #[error("{}", gltf_message(file, value, cause))]
+    Gltf {
+        /// The scene file (the glTF file itself when it is rendered directly).
+        file: PathBuf,
+        /// The `gltf` value as written.
+        value: String,
+        /// Why; it names the glTF file and the item.
+        cause: Box<MeshLoadError>,
+    },
+}
+
+/// `cause`, prefixed by the scene file and the `gltf` key unless the scene is the glTF file.
+fn gltf_message(file: &Path, value: &str, cause: &MeshLoadError) -> String {
+    let same = match cause {
+        MeshLoadError::Read { path, .. }
+        | MeshLoadError::UnsupportedFormat { path }
+        | MeshLoadError::Obj { path, .. }
+        | MeshLoadError::Gltf { path, .. }
+        | MeshLoadError::NoUvs { path, .. }
+        | MeshLoadError::NoTriangles { path }
+        | MeshLoadError::Invalid { path, .. }
+        | MeshLoadError::Mesh { path, .. } => path == file,
+    };
+    if same { cause.to_string() } else { format!("{}: gltf {value:?}: {cause}", crate::shown(file)) }
 }
 
 impl SceneError {
@@ -293,6 +320,7 @@ impl SceneError {
             SceneError::Syntax { field, .. } => field.as_deref(),
             SceneError::Invalid { field, .. } | SceneError::Texture { field, .. } => Some(field),
             SceneError::Mesh { .. } => Some("mesh"),
+            SceneError::Gltf { .. } => Some("gltf"),
         }
     }
 }
@@ -329,7 +357,9 @@ fn syntax_message(
 struct SceneFile {
     background: Option<[f32; 3]>,
     ambient: Option<[f32; 3]>,
-    camera: CameraFile,
+    /// A glTF file whose scene is imported (docs/SCENES.md, glTF files).
+    gltf: Option<String>,
+    camera: Option<CameraFile>,
     #[serde(default)]
     light: Vec<LightFile>,
     #[serde(default)]
@@ -402,7 +432,7 @@ struct MaterialFile {
 struct ObjectFile {
     name: Option<String>,
     mesh: String,
-    material: String,
+    material: Option<String>,
     position: Option<[f32; 3]>,
     rotation: Option<[f32; 3]>,
     scale: Option<NumberOr<[f32; 3]>>,
@@ -435,9 +465,37 @@ enum NumberOr<A> {
 /// valid TOML, has an unknown field or a value of the wrong type or out of range, refers to an
 /// undefined material, or a texture or mesh it names cannot be loaded.
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
-    let text = read_scene_text(path)?;
+    load_scene_warned(path, &mut Vec::new())
+}
+
+/// Whether `path` names a glTF file (`.gltf` or `.glb`), loaded as the scene `gltf = "FILE"`.
+#[must_use]
+pub fn is_gltf(path: &Path) -> bool {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    matches!(ext.as_deref(), Some("gltf" | "glb"))
+}
+
+/// The scene text that imports the glTF file `path` whole (`gltf = "NAME"`, relative to its
+/// folder).
+#[must_use]
+pub fn gltf_scene_text(path: &Path) -> String {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    format!("gltf = {}\n", toml::Value::String(name))
+}
+
+/// [`load_scene`], adding to `warnings` what is drawn otherwise than a glTF file says (a spot
+/// light's cone, a mirrored repeat, an orthographic camera...). A `.gltf` or `.glb` path is
+/// loaded as the scene `gltf = "FILE"` (docs/SCENES.md, glTF files).
+///
+/// # Errors
+/// As [`load_scene`].
+pub fn load_scene_warned(path: &Path, warnings: &mut Vec<String>) -> Result<Scene, SceneError> {
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    parse_scene_named(&text, path, base)
+    let text = if is_gltf(path) { gltf_scene_text(path) } else { read_scene_text(path)? };
+    let mut cache = SceneCache::default();
+    let scene = parse_scene_cached(&text, path, base, &mut cache);
+    warnings.append(&mut cache.warnings);
+    scene
 }
 
 /// The text of a scene file: at most [`crate::read::MAX_SCENE_BYTES`] (docs/LIMITS.md), so a
@@ -461,11 +519,19 @@ fn read_scene_text(path: &Path) -> Result<String, SceneError> {
 /// [`SceneError::Read`] or [`SceneError::Syntax`], as [`load_scene`] gives them (so scene files
 /// over the size cap of docs/LIMITS.md are refused as unreadable).
 pub fn scene_inputs(path: &Path) -> Result<Vec<PathBuf>, SceneError> {
-    let text = read_scene_text(path)?;
+    let text = if is_gltf(path) { gltf_scene_text(path) } else { read_scene_text(path)? };
     let mut parsed: SceneFile = toml::from_str(&text).map_err(|e| syntax_error(path, &text, &e))?;
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     folder::add_folder_materials(&mut parsed, base);
     let mut files = vec![path.to_owned()];
+    let mut meshes = Vec::new();
+    if let Some(g) = &parsed.gltf {
+        let file = base.join(g);
+        if file != path {
+            files.push(file.clone());
+        }
+        meshes.push(file);
+    }
     let mut add = |value: &str| {
         if !value.trim().is_empty() && !value.starts_with("builtin:") {
             files.push(base.join(value));
@@ -474,7 +540,6 @@ pub fn scene_inputs(path: &Path) -> Result<Vec<PathBuf>, SceneError> {
     for m in &parsed.material {
         [&m.albedo, &m.height, &m.normal, &m.cone_map].into_iter().flatten().for_each(|v| add(v));
     }
-    let mut meshes = Vec::new();
     for o in &parsed.object {
         if !is_shape(&o.mesh.trim().to_ascii_lowercase()) {
             add(&o.mesh);
@@ -521,12 +586,20 @@ pub struct SceneCache {
     meshes: HashMap<PathBuf, Arc<Mesh>>,
     /// Mean roughness of texture-library roughness maps.
     roughness: HashMap<PathBuf, f32>,
+    /// What the last parses drew otherwise than their glTF files say.
+    warnings: Vec<String>,
 }
 
 impl SceneCache {
     /// Forgets everything loaded.
     pub fn clear(&mut self) {
         *self = Self::default();
+    }
+
+    /// Takes the warnings of the parses since the last call: what is drawn otherwise than a glTF
+    /// file says (docs/SCENES.md, glTF files).
+    pub fn take_warnings(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.warnings)
     }
 
     /// How many textures and meshes are held.
@@ -708,12 +781,41 @@ impl Loader<'_> {
     fn scene(&mut self, f: SceneFile) -> Result<Scene, SceneError> {
         let background = self.color("scene", "background", f.background.unwrap_or([0.02, 0.02, 0.03]))?;
         let ambient = self.color("scene", "ambient", f.ambient.unwrap_or([0.05, 0.05, 0.06]))?;
-        let camera = self.camera(&f.camera)?;
-        let lights = f.light.iter().enumerate().map(|(i, l)| self.light(i, l)).collect::<Result<Vec<_>, _>>()?;
+        let imported = match &f.gltf {
+            Some(g) => Some(self.import_gltf(g, &f.material)?),
+            None => None,
+        };
+        let camera = match (&f.camera, &imported) {
+            (Some(c), _) => self.camera(c)?,
+            (None, Some(g)) => g.camera,
+            (None, None) => {
+                return Err(SceneError::Syntax {
+                    file: self.file.to_owned(),
+                    position: None,
+                    context: None,
+                    field: None,
+                    message: "missing field `camera` (a [camera] table, or a gltf file that brings one)".to_owned(),
+                });
+            }
+        };
+        let mut lights = f.light.iter().enumerate().map(|(i, l)| self.light(i, l)).collect::<Result<Vec<_>, _>>()?;
+        if let Some(g) = &imported {
+            lights.extend(g.lights.iter().copied());
+            if lights.is_empty() {
+                lights.push(gltf::DEFAULT_SUN);
+            }
+        }
         // The maps, checked against the memory budget before any is generated or decoded.
         self.check_textures(&f)?;
-        let mut materials: Vec<Material> = Vec::with_capacity(f.material.len());
+        let (mut materials, gltf_objects, gltf_names) = match imported {
+            Some(g) => (g.materials, g.objects, g.gltf_names),
+            None => (Vec::new(), Vec::new(), Vec::new()),
+        };
         for (i, m) in f.material.iter().enumerate() {
+            // A material named as one of the glTF file's overrides it (import_gltf).
+            if m.name.as_ref().is_some_and(|n| gltf::overrides(n, &gltf_names)) {
+                continue;
+            }
             let material = self.material(i, m)?;
             if materials.iter().any(|other| other.name == material.name) {
                 let at = format!("material {} ({:?})", i + 1, material.name);
@@ -725,7 +827,7 @@ impl Loader<'_> {
             }
             materials.push(material);
         }
-        if f.object.is_empty() {
+        if f.object.is_empty() && gltf_objects.is_empty() {
             return Err(self.invalid("scene", "object", "the scene has no [[object]]: it needs at least one"));
         }
         // The built-in shapes' meshes, checked against the memory budget before any is built.
@@ -736,8 +838,15 @@ impl Loader<'_> {
             "use fewer segments or rings, or fewer objects",
         )
         .map_err(|e| self.invalid("scene", "object", e.to_string()))?;
-        let objects =
-            f.object.iter().enumerate().map(|(i, o)| self.object(i, o, &materials)).collect::<Result<Vec<_>, _>>()?;
+        let mut objects = gltf_objects;
+        for (i, o) in f.object.iter().enumerate() {
+            if o.material.is_none() && is_gltf(Path::new(o.mesh.trim())) {
+                // A glTF mesh with the file's own materials.
+                self.gltf_object(i, o, &mut materials, &mut objects)?;
+            } else {
+                objects.push(self.object(i, o, &materials)?);
+            }
+        }
         let scene = Scene { camera, lights, materials, objects, ambient, background };
         // What f32 cannot draw (docs/SCENES.md), named here with the file; the renderers check
         // it again for scenes built in code.

@@ -10,30 +10,25 @@ impl Loader<'_> {
             None => format!("object {}", i + 1),
         };
         let at = at.as_str();
-        let material = materials.iter().position(|m| m.name == o.material).ok_or_else(|| {
+        let Some(wanted) = &o.material else {
+            return Err(self.invalid(
+                at,
+                "material",
+                "material is missing: every object needs one (only a glTF mesh may leave it out, to take the file's \
+                 own materials)",
+            ));
+        };
+        let material = materials.iter().position(|m| m.name == *wanted).ok_or_else(|| {
             let names: Vec<&str> = materials.iter().map(|m| m.name.as_str()).collect();
             let known = if names.is_empty() {
                 "there are no [[material]] tables".to_owned()
             } else {
                 format!("materials: {}", names.join(", "))
             };
-            self.invalid(at, "material", format!("material {:?} is not defined ({known})", o.material))
+            self.invalid(at, "material", format!("material {wanted:?} is not defined ({known})"))
         })?;
 
-        let position = self.vec3(at, "position", o.position.unwrap_or([0.0; 3]))?;
-        let rotation = self.vec3(at, "rotation", o.rotation.unwrap_or([0.0; 3]))?;
-        let scale = match o.scale {
-            None => Vec3::ONE,
-            Some(NumberOr::One(s)) => Vec3::splat(s),
-            Some(NumberOr::Each(s)) => Vec3::from(s),
-        };
-        if !(scale.is_finite() && scale.min_element() > 0.0) {
-            return Err(self.invalid(
-                at,
-                "scale",
-                format!("scale is {scale}: every component must be finite and greater than 0"),
-            ));
-        }
+        let transform = self.placement(at, o)?;
         let uv_repeat = match o.uv_repeat {
             None => Vec2::ONE,
             Some(NumberOr::One(r)) => Vec2::splat(r),
@@ -49,11 +44,29 @@ impl Loader<'_> {
 
         let mesh = self.mesh(at, o)?;
         let mesh = if uv_repeat == Vec2::ONE { mesh } else { Arc::new((*mesh).clone().scale_uvs(uv_repeat)) };
+        Ok(Object { name, mesh, material, transform })
+    }
+
+    /// An object's transform from its position, rotation and scale.
+    pub(super) fn placement(&self, at: &str, o: &ObjectFile) -> Result<Mat4, SceneError> {
+        let position = self.vec3(at, "position", o.position.unwrap_or([0.0; 3]))?;
+        let rotation = self.vec3(at, "rotation", o.rotation.unwrap_or([0.0; 3]))?;
+        let scale = match o.scale {
+            None => Vec3::ONE,
+            Some(NumberOr::One(s)) => Vec3::splat(s),
+            Some(NumberOr::Each(s)) => Vec3::from(s),
+        };
+        if !(scale.is_finite() && scale.min_element() > 0.0) {
+            return Err(self.invalid(
+                at,
+                "scale",
+                format!("scale is {scale}: every component must be finite and greater than 0"),
+            ));
+        }
         let r = rotation * (std::f32::consts::PI / 180.0);
         // X first, then Y, then Z (extrinsic): R = Rz * Ry * Rx.
         let rotation = Quat::from_rotation_z(r.z) * Quat::from_rotation_y(r.y) * Quat::from_rotation_x(r.x);
-        let transform = Mat4::from_scale_rotation_translation(scale, rotation, position);
-        Ok(Object { name, mesh, material, transform })
+        Ok(Mat4::from_scale_rotation_translation(scale, rotation, position))
     }
 
     /// The object's mesh: a built-in shape with its parameters, or a file (cached).

@@ -122,10 +122,21 @@ fn sizes_of(f: &SceneFile, base: &Path) -> SceneSizes {
         .iter()
         .map(|o| {
             let (vertices, triangles) = object::shape_counts(o).unwrap_or((0, 0));
-            ObjectSizes { material: names.iter().position(|n| *n == o.material), vertices, triangles }
+            let material = o.material.as_ref().and_then(|m| names.iter().position(|n| n == m));
+            ObjectSizes { material, vertices, triangles }
         })
         .collect();
-    SceneSizes { materials, objects }
+    let mut sizes = SceneSizes { materials, objects };
+    // The glTF file's textures and primitives, after the scene file's own.
+    if let Some(g) = &f.gltf {
+        let (materials, objects) = gltf::gltf_sizes(&base.join(g));
+        let offset = sizes.materials.len();
+        sizes.materials.extend(materials);
+        sizes
+            .objects
+            .extend(objects.into_iter().map(|o| ObjectSizes { material: o.material.map(|m| m + offset), ..o }));
+    }
+    sizes
 }
 
 /// The sizes of the scene file at `path`'s textures and shapes, without building or decoding
@@ -134,7 +145,7 @@ fn sizes_of(f: &SceneFile, base: &Path) -> SceneSizes {
 /// # Errors
 /// [`SceneError::Read`] or [`SceneError::Syntax`], as [`load_scene`] gives them.
 pub fn scene_sizes(path: &Path) -> Result<SceneSizes, SceneError> {
-    let text = read_scene_text(path)?;
+    let text = if is_gltf(path) { gltf_scene_text(path) } else { read_scene_text(path)? };
     let mut parsed: SceneFile = toml::from_str(&text).map_err(|e| syntax_error(path, &text, &e))?;
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     folder::add_folder_materials(&mut parsed, base);
