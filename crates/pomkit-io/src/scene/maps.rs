@@ -76,10 +76,14 @@ fn color_texture(img: DynamicImage, path: &Path) -> Result<Texture, IoError> {
 ///
 /// 8- and 16-bit RGB images hold `n * 0.5 + 0.5`; when the blue channel is zero everywhere the
 /// map is a two-channel one and z is rebuilt from x and y. Float (EXR) images hold the vectors
-/// themselves. Vectors are renormalized. A texel that is not finite, is the zero vector, or
-/// points into the surface (`z / |n|` below `-`[`NORMAL_Z_TOLERANCE`], one 8-bit step, e.g. an
-/// 8-bit blue below 127) is refused; a `z` just below 0 (rounding of a horizontal normal) is
-/// clamped to 0 (docs/SCENES.md).
+/// themselves. Vectors are renormalized. A texel that is not finite or is the zero vector is
+/// refused. Texels that point into the surface are what lossy compression (JPEG) and 8-bit
+/// rounding make of normals near the horizon, and real library maps have a few: a `z / |n|`
+/// down to `-`[`NORMAL_Z_LOSSY`] is clamped to 0, as long as at most [`MAX_INWARD_SHARE`] of
+/// the texels point inward by more than one 8-bit step ([`NORMAL_Z_TOLERANCE`]). A texel
+/// further inward, or more inward texels than that share (an 8-bit blue channel mostly below
+/// 127: probably not a tangent-space normal map, or a mis-encoded one), is refused
+/// (docs/SCENES.md).
 ///
 /// # Errors
 /// [`IoError::Read`], [`IoError::Decode`], [`IoError::Empty`],
@@ -91,14 +95,25 @@ pub fn load_normal_map(path: &Path, y_down: bool) -> Result<NormalMap, IoError> 
 }
 
 /// How far below the surface (as `z / |n|`) a stored normal may point and still be taken as
-/// rounding of a horizontal one (then clamped to `z = 0`): one step of an 8-bit channel.
+/// rounding of a horizontal one (then clamped to `z = 0`, and not counted toward
+/// [`MAX_INWARD_SHARE`]): one step of an 8-bit channel.
 pub const NORMAL_Z_TOLERANCE: f32 = 1.0 / 127.5;
 
-/// A normal map's texel `(x, y)` as a unit vector pointing out of the surface, or the reason it
-/// is none: not finite, zero length, or `z` below `-NORMAL_Z_TOLERANCE` (a tangent-space normal
-/// pointing into the surface, e.g. an 8-bit blue below 127: probably not a tangent-space normal
-/// map, or a mis-encoded one). Slightly negative `z` is clamped to 0.
-fn checked_normal(n: Vec3, path: &Path, x: u32, y: u32) -> Result<Vec3, IoError> {
+/// How far below the surface (as `z / |n|`) a stored normal may point and still be taken as a
+/// horizontal one damaged by lossy compression (then clamped to `z = 0`). ambientCG's JPEG
+/// normal maps of rocks reach about -0.1.
+pub const NORMAL_Z_LOSSY: f32 = 0.25;
+
+/// The largest share of a normal map's texels that may point into the surface by more than
+/// [`NORMAL_Z_TOLERANCE`] (each within [`NORMAL_Z_LOSSY`]) and be clamped: real maps have a few
+/// hundredths of a percent; a map over this share is refused as not a tangent-space normal map.
+pub const MAX_INWARD_SHARE: f64 = 0.01;
+
+/// A normal map's texel `(x, y)` as a unit vector pointing out of the surface, and whether it
+/// pointed inward by more than [`NORMAL_Z_TOLERANCE`]; or the reason it is none: not finite,
+/// zero length, or `z` below `-NORMAL_Z_LOSSY` (a tangent-space normal pointing into the
+/// surface). Slightly negative `z` is clamped to 0.
+fn checked_normal(n: Vec3, path: &Path, x: u32, y: u32) -> Result<(Vec3, bool), IoError> {
     let bad = |reason: &'static str| IoError::BadNormal { path: path.to_owned(), x, y, value: n.to_array(), reason };
     if !n.is_finite() {
         return Err(bad("normals must be finite"));
@@ -107,10 +122,10 @@ fn checked_normal(n: Vec3, path: &Path, x: u32, y: u32) -> Result<Vec3, IoError>
     if len <= 1e-6 {
         return Err(bad("a zero vector is no direction"));
     }
-    if n.z < -NORMAL_Z_TOLERANCE * len {
+    if n.z < -NORMAL_Z_LOSSY * len {
         return Err(bad("it points into the surface (z < 0); tangent-space normals point out of it"));
     }
-    Ok(Vec3::new(n.x, n.y, n.z.max(0.0)).normalize_or(Vec3::Z))
+    Ok((Vec3::new(n.x, n.y, n.z.max(0.0)).normalize_or(Vec3::Z), n.z < -NORMAL_Z_TOLERANCE * len))
 }
 
 /// Where a normal map's `z` comes from.
@@ -159,11 +174,28 @@ pub fn decode_normal_map_with(bytes: &[u8], path: &Path, y_down: bool, z: Normal
     let rgb = img.to_rgb32f();
     let two_channel = z == NormalZ::Rebuilt || (!float && rgb.pixels().all(|p| p.0[2] == 0.0));
     let mut normals = Vec::with_capacity(w as usize * h as usize);
+    let (mut first_inward, mut inward_count) = (None, 0u64);
     for (x, y, p) in rgb.enumerate_pixels() {
         let [nx, ny, nz] = if float { p.0 } else { p.0.map(|c| c * 2.0 - 1.0) };
         let ny = if y_down { -ny } else { ny };
         let n = if two_channel { rebuild_z(Vec2::new(nx, ny)) } else { Vec3::new(nx, ny, nz) };
-        normals.push(checked_normal(n, path, x, y)?);
+        let (n, inward) = checked_normal(n, path, x, y)?;
+        if inward {
+            first_inward.get_or_insert((x, y, Vec3::new(nx, ny, nz)));
+            inward_count += 1;
+        }
+        normals.push(n);
+    }
+    if let Some((x, y, n)) = first_inward
+        && inward_count as f64 > MAX_INWARD_SHARE * normals.len() as f64
+    {
+        return Err(IoError::BadNormal {
+            path: path.to_owned(),
+            x,
+            y,
+            value: n.to_array(),
+            reason: "it points into the surface (z < 0), as do over 1% of the texels; tangent-space normals point out of it",
+        });
     }
     NormalMap::new(w, h, normals).ok_or_else(|| IoError::Empty { path: path.to_owned(), width: w, height: h })
 }

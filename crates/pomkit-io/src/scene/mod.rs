@@ -206,8 +206,8 @@ mod sizes;
 
 use crate::{Channel, HeightLoadOptions, IoError, load_height_field};
 pub use maps::{
-    NORMAL_Z_TOLERANCE, NormalZ, decode_color_texture, decode_normal_map, decode_normal_map_with, load_color_texture,
-    load_normal_map, load_normal_map_with,
+    MAX_INWARD_SHARE, NORMAL_Z_LOSSY, NORMAL_Z_TOLERANCE, NormalZ, decode_color_texture, decode_normal_map,
+    decode_normal_map_with, load_color_texture, load_normal_map, load_normal_map_with,
 };
 use object::{is_shape, shape_bytes};
 pub use sizes::{MaterialSizes, ObjectSizes, SceneSizes, scene_sizes, scene_text_sizes, texture_size};
