@@ -110,6 +110,9 @@ impl SceneDoc {
     /// [`DocError`] naming the file when it cannot be read or is not a valid scene (for a
     /// folder, when its maps cannot be told or loaded).
     pub fn open(path: &Path) -> Result<Self, DocError> {
+        if pomkit_io::scene::is_gltf(path) {
+            return Self::open_gltf(path);
+        }
         if path.is_dir() {
             let text = pomkit_io::library::preview_scene(path);
             let doc = Self::parse(&text, path, Path::new("."))?;
@@ -120,6 +123,32 @@ impl SceneDoc {
         let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
         let doc = Self::parse(&text, path, base)?;
         // Check now that the scene loads (textures, meshes), naming the file in errors.
+        doc.build_named(path, &mut SceneCache::default())?;
+        Ok(doc)
+    }
+
+    /// A glTF file as the scene `gltf = "FILE"` (docs/SCENES.md), with a `[[material]]` per
+    /// material of the file, so that the panel tunes it: empty but for the name, and for a
+    /// traced material its technique and `depth_scale` as the file gives them (the keys a
+    /// `[[material]]` of a glTF material's name overrides).
+    fn open_gltf(path: &Path) -> Result<Self, DocError> {
+        let scene = pomkit_io::scene::load_scene(path)?;
+        let file = std::path::absolute(path).unwrap_or_else(|_| path.to_owned());
+        let mut table = Table::new();
+        table.insert("gltf".into(), Value::String(file.to_string_lossy().into_owned()));
+        let mut materials: Vec<Value> = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for m in scene.materials.iter().filter(|m| seen.insert(m.name.clone())) {
+            let mut t = Table::new();
+            t.insert("name".into(), Value::String(m.name.clone()));
+            if m.height.is_some() {
+                t.insert("technique".into(), Value::String(m.technique.to_string()));
+                t.insert("depth_scale".into(), Value::Float(f64::from(m.depth_scale)));
+            }
+            materials.push(Value::Table(t));
+        }
+        table.insert("material".into(), Value::Array(materials));
+        let doc = Self::parse(&toml::to_string(&table).unwrap_or_default(), path, Path::new("."))?;
         doc.build_named(path, &mut SceneCache::default())?;
         Ok(doc)
     }
@@ -151,7 +180,7 @@ impl SceneDoc {
                 file.display()
             )));
         }
-        if doc.array("object").is_empty() {
+        if doc.array("object").is_empty() && !doc.table.contains_key("gltf") {
             return Err(DocError::Unsupported(format!("{}: the scene has no [[object]]", file.display())));
         }
         Ok(doc)
@@ -443,6 +472,9 @@ fn absolutize(table: &mut Table, base: &Path) {
             }
         }
     };
+    if let Some(v) = table.get_mut("gltf") {
+        fix(v);
+    }
     if let Some(ms) = table.get_mut("material").and_then(Value::as_array_mut) {
         for m in ms.iter_mut().filter_map(Value::as_table_mut) {
             for key in ["albedo", "height", "normal", "folder"] {
@@ -484,6 +516,33 @@ fn absolutize(table: &mut Table, base: &Path) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_gltf_file_opens_as_its_scene_with_its_materials_to_tune() {
+        use pomkit_core::Technique;
+        use pomkit_io::gltf::{SampleOptions, write_sample};
+        let dir = tempfile::tempdir().unwrap();
+        // A 2 x 2 plane with UVs 0..1 and a displacement 0.1 deep: depth_scale 0.1 / 2 = 0.05.
+        let file = write_sample(dir.path(), &SampleOptions::default()).unwrap();
+        let mut doc = SceneDoc::open(&file).expect("the sample opens");
+        assert_eq!(doc.material_names(), ["Bricks"]);
+        assert_eq!(doc.material_field("technique").and_then(Value::as_str), Some("pom"));
+        let depth = doc.material_field("depth_scale").and_then(Value::as_float).unwrap();
+        assert!((depth - 0.05).abs() < 1e-6, "{depth}");
+        let scene = doc.build(&mut SceneCache::default()).unwrap();
+        assert_eq!(scene.objects.len(), 1);
+        assert_eq!(scene.materials[0].technique, Technique::Pom);
+        // The panel's edits reach the file's material, and the doc survives its TOML round trip.
+        doc.set_material_field("technique", Some(Value::String("relief".into())));
+        let again = SceneDoc::from_text(&doc.to_toml(), Path::new("/elsewhere")).expect("round trip");
+        let scene = again.build(&mut SceneCache::default()).unwrap();
+        assert_eq!(scene.materials[0].technique, Technique::Relief);
+        // Without the extension the material is not traced, and the doc says so.
+        let plain = SampleOptions { name: "plain".into(), displacement: None, ..SampleOptions::default() };
+        let doc = SceneDoc::open(&write_sample(dir.path(), &plain).unwrap()).unwrap();
+        assert_eq!(doc.material_field("technique"), None);
+        assert_eq!(doc.build(&mut SceneCache::default()).unwrap().materials[0].technique, Technique::Normal);
+    }
 
     #[test]
     fn default_scene_builds_and_round_trips() {
