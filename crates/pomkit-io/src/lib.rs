@@ -21,6 +21,7 @@ pub mod batch_config;
 mod float;
 use float::float_samples;
 pub mod fuzz_entry;
+pub mod gltf;
 pub mod mesh;
 pub mod output;
 pub mod rays;
