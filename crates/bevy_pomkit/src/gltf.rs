@@ -78,6 +78,7 @@ pub(crate) fn register(app: &mut App, reports: SharedReports) {
         return;
     };
     handlers.0.write_blocking().push(Box::new(GltfHook { reports, ..Default::default() }));
+    app.register_type::<GltfPomkitMesh>();
     app.add_systems(PostUpdate, generate_tangents.before(crate::check_meshes));
 }
 
@@ -213,7 +214,9 @@ fn value_of(p: &params::Param, json: &Json) -> Option<Value> {
         (Kind::Float { .. }, Json::Number(n)) => n.as_f64().map(Value::Float),
         (Kind::Int { .. }, Json::Number(n)) => n.as_i64().map(Value::Int),
         (Kind::Bool, Json::Bool(b)) => Some(Value::Bool(*b)),
-        (Kind::Choice(names), Json::String(s)) => names.iter().find(|n| n.eq_ignore_ascii_case(s)).map(|n| Value::Name(*n)),
+        (Kind::Choice(names), Json::String(s)) => {
+            names.iter().find(|n| n.eq_ignore_ascii_case(s)).map(|n| Value::Name(n))
+        }
         (Kind::Color, Json::Array(a)) if a.len() == 3 => {
             let c: Vec<f64> = a.iter().filter_map(Json::as_f64).collect();
             (c.len() == 3).then(|| Value::Color([c[0], c[1], c[2]]))
@@ -259,7 +262,7 @@ fn apply_setting(r: &mut Request, key: &str, json: &Json) -> Result<Option<Strin
     };
     match (key, value) {
         ("technique", Value::Name(n)) => e.technique = n.parse().map_err(|err| format!("{err}"))?,
-        ("shadow", Value::Name(n)) => e.shadow.mode = n.parse().map_err(|err| format!("{err}"))?,
+        ("shadow", Value::Name(n)) => e.shadow.mode = n.parse()?,
         ("edges", Value::Name(n)) => e.edges = EdgeMode::from_name(n).unwrap_or_default(),
         ("channel", Value::Name(n)) => {
             e.channel = match n {
@@ -324,7 +327,10 @@ struct GltfHook {
 
 /// A marker on the mesh entities of glTF scenes that the hook drew with pomkit: their meshes get
 /// tangents where the file has none (Bevy generates them only for materials with a normal map).
-#[derive(Component, Clone, Copy, Debug, Default)]
+///
+/// Registered for reflection, as every component of a glTF scene must be.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default)]
+#[reflect(Component, Default)]
 pub struct GltfPomkitMesh;
 
 impl GltfHook {
@@ -481,7 +487,8 @@ impl GltfExtensionHandler for GltfHook {
             (None, Some(f)) => match pomkit_core::mesh::displacement_depth_scale(f, unit) {
                 Some(d) => d,
                 None => {
-                    return self.plain(&name, &format!("a depth of {f} on mesh {mesh_name} (UV unit {unit}) is no depth"));
+                    return self
+                        .plain(&name, &format!("a depth of {f} on mesh {mesh_name} (UV unit {unit}) is no depth"));
                 }
             },
             // A height file without a depth: pomkit's default.
@@ -525,10 +532,13 @@ impl GltfExtensionHandler for GltfHook {
     }
 }
 
+/// The glTF mesh entities drawn with pomkit whose mesh was just set.
+type NewGltfMeshes = (With<GltfPomkitMesh>, Or<(Added<GltfPomkitMesh>, Changed<Mesh3d>)>);
+
 /// Gives the meshes of glTF entities drawn with pomkit the tangents the file left out (Bevy's
 /// loader generates them only for materials with a normal map), with Bevy's MikkTSpace.
 fn generate_tangents(
-    query: Query<&Mesh3d, (With<GltfPomkitMesh>, Or<(Added<GltfPomkitMesh>, Changed<Mesh3d>)>)>,
+    query: Query<&Mesh3d, NewGltfMeshes>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut pending: Local<Vec<AssetId<Mesh>>>,
 ) {

@@ -344,7 +344,8 @@ fn build_height_maps(
                             && let Some(bevy::asset::LoadState::Failed(err)) = s.get_load_state(want.source)
                         {
                             maps.report(format!(
-                                "bevy_pomkit: {whose}height map {name} failed to load ({err}): drawing the plain StandardMaterial"
+                                "bevy_pomkit: {whose}height map {name} failed to load ({}): drawing the plain StandardMaterial",
+                                err.to_string().trim_end()
                             ));
                             maps.built.insert(id, want);
                         }
@@ -366,9 +367,9 @@ fn build_height_maps(
                             );
                             Ok(maps.store(&mut images, &want, cached, built))
                         }
-                        Err(e) => {
-                            Err(format!("bevy_pomkit: {whose}height map {name}: {e}: drawing the plain StandardMaterial"))
-                        }
+                        Err(e) => Err(format!(
+                            "bevy_pomkit: {whose}height map {name}: {e}: drawing the plain StandardMaterial"
+                        )),
                     }
                 }
             };
