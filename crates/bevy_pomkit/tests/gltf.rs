@@ -371,3 +371,45 @@ fn a_broken_displacement_texture_draws_the_plain_material_with_one_report() {
     assert!(lit > (W * H / 4) as usize, "the plane should be lit: {lit} pixels");
     assert!(worst < 2e-3, "not the plain material's look (difference {worst})");
 }
+
+/// The sample's `.gltf` with `attribute` taken out of the plane's primitive.
+fn without_attribute(file: &Path, attribute: &str) {
+    let mut json: serde_json::Value = serde_json::from_slice(&std::fs::read(file).expect("read")).expect("JSON");
+    let attributes = json["meshes"][0]["primitives"][0]["attributes"].as_object_mut().expect("attributes");
+    assert!(attributes.remove(attribute).is_some(), "the sample has {attribute}");
+    std::fs::write(file, serde_json::to_vec(&json).expect("JSON")).expect("write");
+}
+
+#[test]
+fn meshes_without_tangents_get_them_and_meshes_without_uvs_stay_plain() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    // No tangents and no normal map (for which Bevy's loader would make them).
+    let (_dir, file) = write(true);
+    let mut json: serde_json::Value = serde_json::from_slice(&std::fs::read(&file).expect("read")).expect("JSON");
+    json["materials"][0].as_object_mut().expect("material").remove("normalTexture");
+    std::fs::write(&file, serde_json::to_vec(&json).expect("JSON")).expect("write");
+    without_attribute(&file, "TANGENT");
+    let (mut app, _) = load(&file);
+    for _ in 0..3 {
+        app.update();
+    }
+    let world = app.world();
+    let mesh = world.query_filtered::<&Mesh3d, With<MeshMaterial3d<PomkitMaterial>>>().single(world).expect("traced");
+    let mesh = world.resource::<Assets<Mesh>>().get(&mesh.0).expect("mesh");
+    assert!(mesh.contains_attribute(Mesh::ATTRIBUTE_TANGENT), "tangents generated");
+    let reports = world.resource::<HeightMaps>().reports();
+    assert!(reports.is_empty(), "{reports:?}");
+    drop(app);
+
+    // No UVs: nothing to trace in.
+    let (_dir, file) = write(true);
+    without_attribute(&file, "TEXCOORD_0");
+    let (mut app, _) = load(&file);
+    let (pomkit, standard) = drawn(&mut app);
+    assert_eq!((pomkit.len(), standard.len()), (0, 1));
+    let reports = app.world().resource::<HeightMaps>().reports();
+    assert_eq!(reports.len(), 1, "{reports:?}");
+    for part in ["sample.gltf", "\"Bricks\"", "TEXCOORD_0", "plain StandardMaterial"] {
+        assert!(reports[0].contains(part), "{part} not in {}", reports[0]);
+    }
+}

@@ -28,6 +28,11 @@ pub struct GltfScene {
 /// Starts loading `file`, a path inside Bevy's asset folder, and spawns its first scene when
 /// it has loaded.
 pub fn spawn(world: &mut World, file: &str) -> GltfScene {
+    // The file's cameras come with Bevy's default tonemapping, which needs lookup tables this
+    // crate leaves out (an error in the log at the first frame): they get ACES as they arrive.
+    world.add_observer(|add: On<Add, Camera3d>, mut commands: Commands| {
+        commands.entity(add.entity).insert(Tonemapping::AcesFitted);
+    });
     let server = world.resource::<AssetServer>();
     let gltf = server.load::<Gltf>(file.to_owned());
     let scene = server.load(GltfAssetLabel::Scene(0).from_asset(file.to_owned()));
