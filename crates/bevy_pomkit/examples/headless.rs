@@ -7,7 +7,20 @@
 //!
 //! Techniques are named as everywhere in pomkit (`pom`, `relief`, `exact`, ...); `bevy-occlusion`
 //! and `bevy-relief` draw the same scene with Bevy's own parallax mapping.
+//!
+//! With `--gltf FILE` it draws the first scene of a glTF file instead, its materials with
+//! `KHR_materials_displacement` or pomkit extras traced by bevy_pomkit (feature `gltf`), seen
+//! from the file's camera and lit by its lights (without them, a camera framing the scene and a
+//! sun); `--technique`, `--shadow` and `--depth-scale`, when given, override every traced
+//! material's:
+//!
+//! ```text
+//! cargo run --release -p bevy_pomkit --example headless -- --gltf scene.gltf --technique relief -o relief.png
+//! ```
 
+#[cfg(feature = "gltf")]
+#[path = "support/gltf.rs"]
+mod gltf;
 #[path = "support/headless.rs"]
 mod headless;
 #[path = "support/scene.rs"]
@@ -25,18 +38,22 @@ use pomkit_core::procedural::Pattern;
 #[derive(Parser)]
 struct Args {
     /// pomkit technique (flat, normal, parallax, iterative, steep, pom-classic, pom, relief,
-    /// exact) or bevy-occlusion / bevy-relief.
-    #[arg(long, default_value = "pom")]
-    technique: String,
-    /// Self-shadow mode: none, hard, soft, exact or depth.
-    #[arg(long, default_value = "soft")]
-    shadow: String,
+    /// exact, cone) or bevy-occlusion / bevy-relief [default: pom; with --gltf, the file's].
+    #[arg(long)]
+    technique: Option<String>,
+    /// Self-shadow mode: none, hard, soft, exact or depth [default: soft; with --gltf, the
+    /// file's].
+    #[arg(long)]
+    shadow: Option<String>,
     /// Height pattern: bricks, pyramids, cobblestones, text, spike, waves, fur, grass.
     #[arg(long, default_value = "cobblestones")]
     pattern: String,
-    /// Depth scale (UV units of one tile).
-    #[arg(long, default_value_t = 0.08)]
-    depth_scale: f32,
+    /// Depth scale (UV units of one tile) [default: 0.08; with --gltf, the file's].
+    #[arg(long)]
+    depth_scale: Option<f32>,
+    /// Draw the first scene of this glTF file (.gltf or .glb) instead of the demo scene.
+    #[arg(long, value_name = "FILE")]
+    gltf: Option<PathBuf>,
     /// Turn pixel depth offset off.
     #[arg(long)]
     no_pixel_depth: bool,
@@ -68,32 +85,113 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<(), String> {
-    let method = scene::Method::parse(&args.technique)?;
-    let shadow: bevy_pomkit::ShadowMode = args.shadow.parse().map_err(|e| format!("--shadow: {e}"))?;
-    let pattern: Pattern = args.pattern.parse().map_err(|e| format!("--pattern: {e}"))?;
-    if !(args.depth_scale.is_finite() && args.depth_scale > 0.0) {
-        return Err(format!("--depth-scale {}: it must be a finite number above 0", args.depth_scale));
-    }
     if args.width == 0 || args.height == 0 || args.width > 8192 || args.height > 8192 {
         return Err(format!("--width {} --height {}: each must be 1 to 8192", args.width, args.height));
     }
-    let opts = scene::SceneOptions {
-        method,
-        shadow,
-        pattern,
-        depth_scale: args.depth_scale,
-        pixel_depth: !args.no_pixel_depth,
-        ..Default::default()
+    if let Some(d) = args.depth_scale
+        && !(d.is_finite() && d > 0.0)
+    {
+        return Err(format!("--depth-scale {d}: it must be a finite number above 0"));
+    }
+    let shadow: Option<bevy_pomkit::ShadowMode> =
+        args.shadow.as_deref().map(str::parse).transpose().map_err(|e| format!("--shadow: {e}"))?;
+    let (mut app, name) = match &args.gltf {
+        Some(file) => gltf_scene(args, file, shadow)?,
+        None => demo_scene(args, shadow)?,
     };
-    let mut app = headless::Headless::new(args.width, args.height);
-    let target = RenderTarget::Image(app.target().into());
-    scene::spawn(app.world(), Some(target), &opts);
     let frame = app.frame(Duration::from_secs(600)).map_err(|e| e.to_string())?;
     let png = image::RgbaImage::from_raw(frame.width, frame.height, frame.to_srgb8())
         .ok_or("the frame's size does not match its pixels")?;
     let tmp = args.output.with_extension("png.tmp");
     png.save_with_format(&tmp, image::ImageFormat::Png).map_err(|e| format!("{}: {e}", args.output.display()))?;
     std::fs::rename(&tmp, &args.output).map_err(|e| format!("{}: {e}", args.output.display()))?;
-    println!("wrote {} ({}x{}, {})", args.output.display(), frame.width, frame.height, method.name());
+    println!("wrote {} ({}x{}, {name})", args.output.display(), frame.width, frame.height);
     Ok(())
+}
+
+/// The demo scene, as the arguments set it up.
+fn demo_scene(args: &Args, shadow: Option<bevy_pomkit::ShadowMode>) -> Result<(headless::Headless, String), String> {
+    let method = scene::Method::parse(args.technique.as_deref().unwrap_or("pom"))?;
+    let pattern: Pattern = args.pattern.parse().map_err(|e| format!("--pattern: {e}"))?;
+    let opts = scene::SceneOptions {
+        method,
+        shadow: shadow.unwrap_or(bevy_pomkit::ShadowMode::Soft),
+        pattern,
+        depth_scale: args.depth_scale.unwrap_or(0.08),
+        pixel_depth: !args.no_pixel_depth,
+        ..Default::default()
+    };
+    let mut app = headless::Headless::new(args.width, args.height);
+    let target = RenderTarget::Image(app.target().into());
+    scene::spawn(app.world(), Some(target), &opts);
+    Ok((app, method.name()))
+}
+
+/// The first scene of a glTF file, with the arguments' overrides.
+#[cfg(feature = "gltf")]
+fn gltf_scene(
+    args: &Args,
+    file: &std::path::Path,
+    shadow: Option<bevy_pomkit::ShadowMode>,
+) -> Result<(headless::Headless, String), String> {
+    use bevy::prelude::*;
+    use bevy_pomkit::PomkitMaterial;
+    let technique: Option<bevy_pomkit::Technique> = match args.technique.as_deref() {
+        None => None,
+        Some(t) => Some(t.parse().map_err(|e| format!("--technique: {e} (with --gltf, a pomkit technique)"))?),
+    };
+    // Bevy reads assets from its asset folder only: the file's folder becomes it.
+    let path = std::fs::canonicalize(file).map_err(|e| format!("{}: {e}", file.display()))?;
+    let (Some(folder), Some(name)) = (path.parent(), path.file_name().and_then(|n| n.to_str())) else {
+        return Err(format!("{}: not a file name Bevy can load", file.display()));
+    };
+    let mut app = headless::Headless::with_assets(args.width, args.height, Some(folder));
+    let scene = gltf::spawn(app.world(), name);
+    let start = std::time::Instant::now();
+    loop {
+        app.update();
+        match gltf::progress(app.world(), &scene) {
+            gltf::Progress::Spawned => break,
+            gltf::Progress::Failed(e) => return Err(e),
+            gltf::Progress::Loading if start.elapsed() > Duration::from_secs(120) => {
+                return Err(format!("{}: its scene did not load within 120 s", file.display()));
+            }
+            gltf::Progress::Loading => {}
+        }
+    }
+    // Global transforms of the new entities, for the default camera's framing.
+    app.update();
+    let target = RenderTarget::Image(app.target().into());
+    gltf::finish(app.world(), Some(target));
+    let mut materials = app.world().resource_mut::<Assets<PomkitMaterial>>();
+    let ids: Vec<_> = materials.ids().collect();
+    for id in &ids {
+        let Some(mut m) = materials.get_mut(*id) else { continue };
+        let e = &mut m.extension;
+        if let Some(t) = technique {
+            e.technique = t;
+        }
+        if let Some(s) = shadow {
+            e.shadow.mode = s;
+        }
+        if let Some(d) = args.depth_scale {
+            e.depth_scale = d;
+        }
+        e.pixel_depth_offset &= !args.no_pixel_depth;
+    }
+    let what = match technique {
+        Some(t) => t.name().to_owned(),
+        None => format!("{} traced materials", ids.len()),
+    };
+    Ok((app, what))
+}
+
+/// Without the `gltf` feature there is no glTF loader.
+#[cfg(not(feature = "gltf"))]
+fn gltf_scene(
+    _args: &Args,
+    file: &std::path::Path,
+    _shadow: Option<bevy_pomkit::ShadowMode>,
+) -> Result<(headless::Headless, String), String> {
+    Err(format!("{}: bevy_pomkit was built without its `gltf` feature", file.display()))
 }

@@ -47,6 +47,8 @@
 //! Tangent handedness). The shader orients the bitangent by the screen-space UV derivatives, so
 //! either sign traces the same way.
 
+#[cfg(feature = "gltf")]
+pub mod gltf;
 pub mod height;
 mod material;
 
@@ -159,8 +161,11 @@ impl Plugin for PomkitPlugin {
                 error!("bevy_pomkit: could not register a shader: {e}");
             }
         }
+        let maps = HeightMaps::default();
+        #[cfg(feature = "gltf")]
+        gltf::register(app, maps.gltf_reports.clone());
         app.add_plugins(MaterialPlugin::<PomkitMaterial>::default())
-            .init_resource::<HeightMaps>()
+            .insert_resource(maps)
             .add_systems(PostUpdate, (build_height_maps, check_meshes));
     }
 
@@ -198,6 +203,9 @@ pub struct HeightMaps {
     cache: HashMap<Built, Textures>,
     reported: HashSet<String>,
     derived: HashSet<AssetId<Image>>,
+    /// What the glTF hook reported while loading files.
+    #[cfg(feature = "gltf")]
+    gltf_reports: gltf::SharedReports,
 }
 
 /// The textures of one height map at one set of settings.
@@ -222,10 +230,13 @@ impl HeightMaps {
         self.built.contains_key(&id)
     }
 
-    /// Every bad input reported so far (each message also went to Bevy's log once).
+    /// Every bad input reported so far (each message also went to Bevy's log once), those of
+    /// glTF files' materials included.
     #[must_use]
     pub fn reports(&self) -> Vec<String> {
         let mut r: Vec<String> = self.reported.iter().cloned().collect();
+        #[cfg(feature = "gltf")]
+        r.extend(self.gltf_reports.all());
         r.sort();
         r
     }
@@ -312,13 +323,14 @@ fn build_height_maps(
         };
         let stale = maps.built.get(&id) != Some(&want) || changed.contains(&want.source);
         if stale {
-            work.push((id, want));
+            let whose = e.name.as_ref().map(|n| format!("{n}: ")).unwrap_or_default();
+            work.push((id, want, whose));
         }
     }
     // Materials with the same height map and settings share one set of textures; a changed
     // source is rebuilt once, in place, for all of them.
     let mut done: HashMap<Built, Result<Textures, String>> = HashMap::default();
-    for (id, want) in work {
+    for (id, want, whose) in work {
         let name = image_name(server, want.source);
         let result = if let Some(r) = done.get(&want) {
             r.clone()
@@ -332,7 +344,8 @@ fn build_height_maps(
                             && let Some(bevy::asset::LoadState::Failed(err)) = s.get_load_state(want.source)
                         {
                             maps.report(format!(
-                                "bevy_pomkit: height map {name} failed to load ({err}): drawing the plain StandardMaterial"
+                                "bevy_pomkit: {whose}height map {name} failed to load ({}): drawing the plain StandardMaterial",
+                                err.to_string().trim_end()
                             ));
                             maps.built.insert(id, want);
                         }
@@ -354,9 +367,9 @@ fn build_height_maps(
                             );
                             Ok(maps.store(&mut images, &want, cached, built))
                         }
-                        Err(e) => {
-                            Err(format!("bevy_pomkit: height map {name}: {e}: drawing the plain StandardMaterial"))
-                        }
+                        Err(e) => Err(format!(
+                            "bevy_pomkit: {whose}height map {name}: {e}: drawing the plain StandardMaterial"
+                        )),
                     }
                 }
             };
@@ -404,7 +417,8 @@ fn build_height_maps(
     // Parameters the tracers refuse (a depth scale that is not finite and positive, ...).
     for (id, m) in materials.iter() {
         if let Err(e) = m.extension.params() {
-            maps.report(format!("bevy_pomkit: material {id}: {e}: drawing the plain StandardMaterial"));
+            let whose = m.extension.name.clone().unwrap_or_else(|| format!("material {id}"));
+            maps.report(format!("bevy_pomkit: {whose}: {e}: drawing the plain StandardMaterial"));
         }
     }
 }
@@ -421,7 +435,7 @@ fn want_depth_scale(s: f32) -> f32 {
 /// or material was just set.
 type NewlyDrawn = (With<MeshMaterial3d<PomkitMaterial>>, Or<(Changed<Mesh3d>, Added<MeshMaterial3d<PomkitMaterial>>)>);
 
-fn check_meshes(
+pub(crate) fn check_meshes(
     query: Query<(Entity, &Mesh3d), NewlyDrawn>,
     meshes: Res<Assets<Mesh>>,
     server: Option<Res<AssetServer>>,

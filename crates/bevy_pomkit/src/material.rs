@@ -105,6 +105,9 @@ pub struct Pomkit {
     pub entry_gradients: bool,
     /// Debug output instead of the shaded colour.
     pub debug: PomkitDebug,
+    /// What the plugin's log messages call this material (the glTF hook sets `glTF "FILE",
+    /// material "NAME"`). `None`: its asset path, or its id.
+    pub name: Option<String>,
     /// Depth (R) and parallax value (G), all mips; built by the plugin.
     #[texture(101)]
     #[sampler(102)]
@@ -143,6 +146,7 @@ impl Pomkit {
             normals: true,
             entry_gradients: true,
             debug: PomkitDebug::Off,
+            name: None,
             heights: None,
             pyramid: None,
             normal_texture: None,

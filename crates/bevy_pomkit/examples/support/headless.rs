@@ -100,6 +100,13 @@ impl Headless {
     /// give the camera `RenderTarget::Image(headless.target().into())`.
     #[must_use]
     pub fn new(width: u32, height: u32) -> Self {
+        Self::with_assets(width, height, None)
+    }
+
+    /// The same, with Bevy's asset folder at `assets` (the folder of a glTF file to load: Bevy
+    /// loads no file outside its asset folder).
+    #[must_use]
+    pub fn with_assets(width: u32, height: u32, assets: Option<&std::path::Path>) -> Self {
         let mut app = App::new();
         let mut plugins = DefaultPlugins
             .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
@@ -111,6 +118,9 @@ impl Headless {
         static LOGGING: AtomicBool = AtomicBool::new(false);
         if LOGGING.swap(true, Ordering::SeqCst) {
             plugins = plugins.disable::<LogPlugin>();
+        }
+        if let Some(folder) = assets {
+            plugins = plugins.set(AssetPlugin { file_path: folder.display().to_string(), ..default() });
         }
         app.add_plugins((plugins, ScheduleRunnerPlugin::run_loop(Duration::ZERO), PomkitPlugin));
         // Finish plugin set-up (the renderer initializes asynchronously).
@@ -245,6 +255,10 @@ impl Headless {
 
 impl Drop for Headless {
     fn drop(&mut self) {
+        // After a panic (a failed assertion, a panicking system) the app may not run again.
+        if std::thread::panicking() {
+            return;
+        }
         self.stop_reading_back();
     }
 }
