@@ -106,13 +106,15 @@ fn render_material_equals_a_scene_naming_the_maps_one_by_one() {
     // for roughness 128/255 worked out here.
     let r = 128.0f64 / 255.0;
     let shininess = 2.0 / (r * r).powi(2) - 2.0;
+    // The lobe normalized to a dielectric's 4%: 0.04 * (n + 8) / 8.
+    let specular = 0.04 * (shininess + 8.0) / 8.0;
     let preview = pomkit_io::library::preview_scene(Path::new("Bricks"));
     let folder_line = preview.lines().find(|l| l.starts_with("folder = ")).unwrap();
     let named = preview.replace(
         folder_line,
         &format!(
             "albedo = \"Bricks/Bricks_1K_Color.png\"\nnormal = \"Bricks/Bricks_1K_NormalGL.png\"\n\
-             height = \"Bricks/Bricks_1K_Displacement.png\"\nshininess = {shininess}"
+             height = \"Bricks/Bricks_1K_Displacement.png\"\nshininess = {shininess}\nspecular = {specular}"
         ),
     );
     assert_ne!(named, preview);

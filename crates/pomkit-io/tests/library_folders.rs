@@ -225,11 +225,13 @@ fn material_folder_on_an_object_equals_the_maps_named_one_by_one() {
     // Roughness 128/255 everywhere: alpha = r^2, shininess = 2 / alpha^2 - 2.
     let r = 128.0f64 / 255.0;
     let shininess = 2.0 / (r * r).powi(2) - 2.0;
+    // The lobe normalized to a dielectric's 4%: 0.04 * (n + 8) / 8.
+    let specular = 0.04 * (shininess + 8.0) / 8.0;
     let by_name = parse_scene(
         &format!(
             "{CAMERA}\n[[material]]\nname = \"m\"\nalbedo = \"textures/Bricks/Bricks_1K_Color.png\"\n\
              normal = \"textures/Bricks/Bricks_1K_NormalGL.png\"\nheight = \"textures/Bricks/Bricks_1K_Displacement.png\"\n\
-             shininess = {shininess}\n\n[[object]]\nmesh = \"plane\"\nmaterial = \"m\"\n"
+             shininess = {shininess}\nspecular = {specular}\n\n[[object]]\nmesh = \"plane\"\nmaterial = \"m\"\n"
         ),
         dir.path(),
     )
@@ -238,11 +240,12 @@ fn material_folder_on_an_object_equals_the_maps_named_one_by_one() {
     assert_eq!(a.name, "textures/Bricks");
     assert_eq!(by_folder.objects[0].material, 0);
     assert!((a.shininess - b.shininess).abs() < 1e-3, "{} vs {}", a.shininess, b.shininess);
+    assert!((a.specular - b.specular).abs() < 1e-5, "{} vs {}", a.specular, b.specular);
     assert_eq!(a.albedo.as_ref().unwrap().texels(), b.albedo.as_ref().unwrap().texels());
     assert_eq!(a.normal_map.as_ref().unwrap().normals(), b.normal_map.as_ref().unwrap().normals());
     assert_eq!(a.height.as_ref().unwrap().depths(), b.height.as_ref().unwrap().depths());
     // Every other setting is the scene file's default.
-    assert_eq!((a.technique, a.depth_scale, a.specular), (b.technique, b.depth_scale, b.specular));
+    assert_eq!((a.technique, a.depth_scale), (b.technique, b.depth_scale));
     assert_eq!(a.technique, Technique::Pom);
 }
 

@@ -445,14 +445,6 @@ fn edges_of(sampler: &gltf::texture::Sampler<'_>, label: &str, warnings: &mut Ve
     }
 }
 
-/// The Blinn-Phong exponent for a glTF roughness: `2 / a^2 - 2` with `a = roughness^2` (the
-/// exponent whose lobe matches a Beckmann/GGX lobe of that width), from 1 (rough) to 8192.
-#[must_use]
-pub(crate) fn shininess_of_roughness(roughness: f32) -> f32 {
-    let a = roughness.clamp(0.0, 1.0).powi(2).max(1e-6);
-    (2.0 / (a * a) - 2.0).clamp(1.0, 8192.0)
-}
-
 /// A glTF material as a pomkit material (no depth_scale yet), its UV transform and its
 /// displacement factor.
 fn prepare(
@@ -476,7 +468,10 @@ fn prepare(
     let mut material = Material {
         name: gltf_name.clone(),
         base_color: factor.max(Vec3::ZERO),
-        shininess: shininess_of_roughness(pbr.roughness_factor()),
+        shininess: crate::library::shininess_from_roughness(pbr.roughness_factor()),
+        specular: crate::library::specular_for_shininess(crate::library::shininess_from_roughness(
+            pbr.roughness_factor(),
+        )),
         technique: Technique::Normal,
         ..Material::default()
     };

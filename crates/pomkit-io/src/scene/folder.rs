@@ -127,7 +127,11 @@ impl Loader<'_> {
                     mean
                 }
             };
-            out.shininess = Some(library::shininess_from_roughness(mean));
+            let shininess = library::shininess_from_roughness(mean);
+            out.shininess = Some(shininess);
+            if m.specular.is_none() {
+                out.specular = Some(library::specular_for_shininess(shininess));
+            }
         }
         Ok(out)
     }
