@@ -243,3 +243,55 @@ fn bad_folders_and_a_scene_with_material_are_refused() {
     std::fs::remove_file(dir.join("Bricks/Bricks_1K_Displacement.png")).unwrap();
     refuses(&with(&["--material", "Bricks"]), dir, &["no height map", "colour: Bricks_1K_Color.png"]);
 }
+
+/// Mean of the 8-bit channels over the middle of a picture (the plane fills it).
+fn middle_mean(path: &Path) -> f64 {
+    let img = image::open(path).unwrap().to_rgb8();
+    let (w, h) = img.dimensions();
+    let mut sum = 0.0;
+    let mut n = 0.0;
+    for y in h / 3..h * 9 / 10 {
+        for x in w / 5..w * 4 / 5 {
+            sum += img.get_pixel(x, y).0.iter().map(|&c| f64::from(c)).sum::<f64>();
+            n += 3.0;
+        }
+    }
+    sum / n
+}
+
+/// The repository's real library folder (ambientCG's Rocks011, assets/README.md): a JPEG normal
+/// map with texels lossy compression turned slightly inward (once refused), both an OpenGL and
+/// a DirectX map, and a rough surface whose highlight must not wash the picture out: with the
+/// normalized lobe, the specular adds at most a third to the diffuse-only picture (the full
+/// default strength with the roughness's broad lobe added two thirds).
+#[test]
+fn the_real_library_folder_renders_and_its_rough_surface_is_not_washed_out() {
+    let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/Rocks011");
+    let dir = tempfile::tempdir().unwrap();
+    let folder_arg = folder.to_str().unwrap();
+    let args = ["render", "--material", folder_arg, "--backend", "cpu", "--size", "96x54", "-o", "lib.png"];
+    let out = pomkit(&args, dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    for needle in [
+        "colour: Rocks011_512_Color.jpg",
+        "normal: Rocks011_512_NormalGL.jpg (OpenGL, +Y up)",
+        "height: Rocks011_512_Displacement.png",
+        "ignored: Rocks011_512_NormalDX.jpg",
+    ] {
+        assert!(err.contains(needle), "{needle:?} not in {err}");
+    }
+    // The same scene with the highlight off: the diffuse light alone.
+    let scene = pomkit_io::library::preview_scene(&folder).replace(
+        &format!("folder = {}", toml::Value::String(folder.to_string_lossy().into_owned())),
+        &format!("folder = {}\nspecular = 0.0", toml::Value::String(folder.to_string_lossy().into_owned())),
+    );
+    assert!(scene.contains("specular = 0.0"), "{scene}");
+    std::fs::write(dir.path().join("diffuse.toml"), scene).unwrap();
+    let out =
+        pomkit(&["render", "diffuse.toml", "--backend", "cpu", "--size", "96x54", "-o", "diffuse.png"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (lit, diffuse) = (middle_mean(&dir.path().join("lib.png")), middle_mean(&dir.path().join("diffuse.png")));
+    assert!(diffuse > 40.0, "the diffuse picture is dark: {diffuse}");
+    assert!(lit > diffuse && lit < diffuse * 4.0 / 3.0, "with the highlight {lit}, without {diffuse}");
+}

@@ -130,20 +130,28 @@ impl SceneDoc {
     /// A glTF file as the scene `gltf = "FILE"` (docs/SCENES.md), with a `[[material]]` per
     /// material of the file, so that the panel tunes it: empty but for the name, and for a
     /// traced material its technique and `depth_scale` as the file gives them (the keys a
-    /// `[[material]]` of a glTF material's name overrides).
+    /// `[[material]]` of a glTF material's name overrides); not the `depth_scale` of a material
+    /// drawn at several UV scales, whose copies each have their own until the panel sets one.
     fn open_gltf(path: &Path) -> Result<Self, DocError> {
         let scene = pomkit_io::scene::load_scene(path)?;
         let file = std::path::absolute(path).unwrap_or_else(|_| path.to_owned());
         let mut table = Table::new();
         table.insert("gltf".into(), Value::String(file.to_string_lossy().into_owned()));
+        let names = pomkit_io::gltf::material_names(path)
+            .map_err(|e| DocError::Unsupported(format!("{}: {e}", path.display())))?;
         let mut materials: Vec<Value> = Vec::new();
-        let mut seen = std::collections::HashSet::new();
-        for m in scene.materials.iter().filter(|m| seen.insert(m.name.clone())) {
+        // A material drawn at several UV scales is split into copies (`NAME ~2`...); the first
+        // keeps the file's name, and a table of that name tunes them all.
+        for (name, m) in names.iter().filter_map(|n| Some((n, scene.materials.iter().find(|m| &m.name == n)?))) {
             let mut t = Table::new();
-            t.insert("name".into(), Value::String(m.name.clone()));
+            t.insert("name".into(), Value::String(name.clone()));
             if m.height.is_some() {
                 t.insert("technique".into(), Value::String(m.technique.to_string()));
-                t.insert("depth_scale".into(), Value::Float(f64::from(m.depth_scale)));
+                // Split copies keep their own depths unless the panel sets one for all.
+                let copy = format!("{name} ~");
+                if !scene.materials.iter().any(|c| c.name.starts_with(&copy)) {
+                    t.insert("depth_scale".into(), Value::Float(f64::from(m.depth_scale)));
+                }
             }
             materials.push(Value::Table(t));
         }
@@ -537,6 +545,21 @@ mod tests {
         let again = SceneDoc::from_text(&doc.to_toml(), Path::new("/elsewhere")).expect("round trip");
         let scene = again.build(&mut SceneCache::default()).unwrap();
         assert_eq!(scene.materials[0].technique, Technique::Relief);
+        // A material drawn at two UV scales (the repository's rocks.gltf: a floor whose UV unit
+        // is 1 long and a box whose is 0.8) is split into two copies with their own
+        // depth_scale; the doc lists the file's material once, and it builds.
+        let rocks = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rocks.gltf");
+        let heights = pomkit_core::HeightField::from_height_fn(8, 8, |x, y| ((x + y) % 4) as f32 / 3.0);
+        let traced = dir.path().join("rocks_pom.gltf");
+        let choice = pomkit_io::gltf::MaterialChoice::Name("Rocks".into());
+        pomkit_io::gltf::attach(&rocks, &traced, &choice, &heights, pomkit_io::gltf::AttachDepth::Units(0.05), &[])
+            .unwrap();
+        let doc = SceneDoc::open(&traced).expect("a split material opens");
+        assert_eq!(doc.material_names(), ["Rocks"]);
+        let scene = doc.build(&mut SceneCache::default()).unwrap();
+        let depths: Vec<f32> = scene.materials.iter().map(|m| m.depth_scale).collect();
+        assert_eq!(depths.len(), 2, "{depths:?}");
+        assert!((depths[0] - 0.05).abs() < 1e-5 && (depths[1] - 0.0625).abs() < 1e-5, "{depths:?}");
         // Without the extension the material is not traced, and the doc says so.
         let plain = SampleOptions { name: "plain".into(), displacement: None, ..SampleOptions::default() };
         let doc = SceneDoc::open(&write_sample(dir.path(), &plain).unwrap()).unwrap();

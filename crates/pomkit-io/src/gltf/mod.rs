@@ -26,6 +26,22 @@ pub use sample::{SampleCamera, SampleDisplacement, SampleLight, SampleOptions, w
 /// `red * factor + offset` in the mesh's own units (docs/SCENES.md, glTF files).
 pub const DISPLACEMENT_EXTENSION: &str = "KHR_materials_displacement";
 
+/// The names of a glTF file's materials as scene files know them (a `[[material]]` of one of
+/// these names overrides that material's keys), in the file's order, each once: the material's
+/// own name, `NAME (INDEX)` when two share it, or `material INDEX` without one.
+///
+/// # Errors
+/// [`crate::mesh::MeshLoadError`] naming the file when it cannot be read as a glTF scene.
+pub fn material_names(path: &std::path::Path) -> Result<Vec<String>, crate::mesh::MeshLoadError> {
+    let mut names: Vec<String> = Vec::new();
+    for m in import::import(path)?.materials {
+        if !names.contains(&m.gltf_name) {
+            names.push(m.gltf_name);
+        }
+    }
+    Ok(names)
+}
+
 /// Writes every `(path, bytes)` staged, and renames them into place only when all are written
 /// (a failure leaves none of them).
 pub(crate) fn write_all_or_nothing(files: &[(PathBuf, Vec<u8>)]) -> Result<(), IoError> {
