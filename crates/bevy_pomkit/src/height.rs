@@ -104,9 +104,11 @@ fn layout(format: TextureFormat) -> Option<(usize, Sample)> {
         F::R8Unorm => (1, Sample::Unorm8),
         F::Rg8Unorm => (2, Sample::Unorm8),
         F::Rgba8Unorm | F::Rgba8UnormSrgb | F::Bgra8Unorm | F::Bgra8UnormSrgb => (4, Sample::Unorm8),
-        F::R16Unorm => (1, Sample::Unorm16),
-        F::Rg16Unorm => (2, Sample::Unorm16),
-        F::Rgba16Unorm => (4, Sample::Unorm16),
+        // Bevy's image loader labels 16-bit grey and grey-alpha PNGs (what `pomkit bake` and
+        // `pomkit gltf attach` write) `R16Uint`/`Rg16Uint`: the same 16-bit numbers, read as unorm.
+        F::R16Unorm | F::R16Uint => (1, Sample::Unorm16),
+        F::Rg16Unorm | F::Rg16Uint => (2, Sample::Unorm16),
+        F::Rgba16Unorm | F::Rgba16Uint => (4, Sample::Unorm16),
         F::R16Float => (1, Sample::Float16),
         F::Rg16Float => (2, Sample::Float16),
         F::Rgba16Float => (4, Sample::Float16),

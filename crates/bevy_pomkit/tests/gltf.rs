@@ -413,3 +413,25 @@ fn meshes_without_tangents_get_them_and_meshes_without_uvs_stay_plain() {
         assert!(reports[0].contains(part), "{part} not in {}", reports[0]);
     }
 }
+
+#[test]
+fn a_height_map_put_in_by_gltf_attach_is_traced_in_bevy() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    // The sample without the extension, then `pomkit gltf attach`'s library call: the height map
+    // written beside the output as a 16-bit PNG, the factor in the file's units.
+    let (dir, plain) = write(false);
+    let attached = dir.path().join("attached.gltf");
+    let heights = pomkit_core::HeightField::from_height_fn(TEXELS, TEXELS, |x, y| ((x / 8 + y / 8) % 2) as f32);
+    let choice = pomkit_io::gltf::MaterialChoice::Name("Bricks".into());
+    let depth = pomkit_io::gltf::AttachDepth::Units(FACTOR);
+    pomkit_io::gltf::attach(&plain, &attached, &choice, &heights, depth, &[]).expect("attached");
+    let (mut app, _) = load(&attached);
+    let (pomkit, standard) = drawn(&mut app);
+    assert_eq!((pomkit.len(), standard.len()), (1, 0), "the attached material is traced");
+    let materials = app.world().resource::<Assets<PomkitMaterial>>();
+    let m = materials.get(&pomkit[0]).expect("the material");
+    let want = FACTOR / PLANE;
+    assert!((m.extension.depth_scale - want).abs() < 1e-6, "depth_scale {} != {want}", m.extension.depth_scale);
+    let reports = app.world().resource::<HeightMaps>().reports();
+    assert!(reports.is_empty(), "{reports:?}");
+}
