@@ -16,7 +16,7 @@
 //!
 //! - [`IntegrateMethod::Poisson`] takes every weight 1: the discrete Poisson equation, solved
 //!   exactly by FFT (wrap, tiling maps: Frankot and Chellappa's projection in its discrete
-//!   form) or DCT (clamp, Neumann boundaries), see [`poisson`].
+//!   form) or DCT (clamp, Neumann boundaries), see `poisson.rs`.
 //! - [`IntegrateMethod::Weighted`] is bilateral normal integration (Cao et al. 2022,
 //!   docs/REFERENCES.md) on this grid: each texel lends its slope to its forward and backward
 //!   edge along each axis with weights `w+ = sigmoid(k ((D- z)^2 - (D+ z)^2))` and
