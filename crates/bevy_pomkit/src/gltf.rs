@@ -2,7 +2,7 @@
 //! [`PomkitMaterial`] every material that carries `KHR_materials_displacement` or pomkit's
 //! settings in its `extras`.
 //!
-//! `KHR_materials_displacement` is a draft extension (KhronosGroup/glTF issue 948) that NVIDIA's
+//! `KHR_materials_displacement` is a draft extension (docs/REFERENCES.md) that NVIDIA's
 //! samples read. On a material it gives `displacementGeometryTexture` (a texture info; the red
 //! channel is the height, white out), `displacementGeometryFactor` (default 1) and
 //! `displacementGeometryOffset` (default 0): the surface moves along the normal by `red * factor
