@@ -136,7 +136,7 @@ fn exported_scene_renders_the_viewers_picture() {
     doc.set_light_direction(Vec3::new(0.7, 0.5, 0.2));
     let (w, h) = (320u32, 240u32);
 
-    // What the viewer's render thread draws for this session.
+    // What the viewer's render thread draws for this saved session.
     let ctx = pomkit_gpu::GpuContext::new().expect("adapter");
     let mut renderer = ViewRenderer::new(ctx);
     let req = ViewRequest::new(doc.clone(), w, h);

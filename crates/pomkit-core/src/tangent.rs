@@ -1022,7 +1022,7 @@ mod tests {
 
     #[test]
     fn mikktspace_all_degenerate_input_does_not_panic() {
-        // The input of bevy issue 14874, where mikktspace 0.3 underflows.
+        // The input reported to Bevy as bevyengine/bevy#14874, where mikktspace 0.3 underflows.
         let p = vec![Vec3::Y, Vec3::ZERO, Vec3::Y];
         let n = vec![Vec3::ZERO; 3];
         let uv = vec![Vec2::Y, Vec2::ZERO, Vec2::Y];
