@@ -63,7 +63,7 @@ fn main() {
                 let out = integrate_normals(w, h, &normals, &opts, &|_| {}).expect("integrates");
                 let secs = t0.elapsed().as_secs_f64();
                 let got: Vec<f32> = out.heights().iter().map(|z| z / scale()).collect();
-                let (r, rms) = compare(&got, &truth);
+                let (r, rms) = pomkit_core::integrate::height_agreement(&got, &truth);
                 println!(
                     "| {} | {case} | {} | {r:.4} | {rms:.4} | {} | {secs:.2} |",
                     pattern.map_or("square", Pattern::name),
@@ -142,20 +142,4 @@ fn crop(field: &HeightField, a: u32, b: u32) -> HeightField {
     let w = field.width();
     let h = field.heights();
     HeightField::from_height_fn(b - a, b - a, |x, y| h[((y + a) * w + x + a) as usize])
-}
-
-/// Pearson's r, and the RMS of the difference once the means are taken out.
-fn compare(got: &[f32], truth: &[f32]) -> (f64, f64) {
-    let n = got.len() as f64;
-    let mg = got.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
-    let mt = truth.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
-    let (mut sgt, mut sgg, mut stt, mut sd) = (0.0, 0.0, 0.0, 0.0);
-    for (&g, &t) in got.iter().zip(truth) {
-        let (g, t) = (f64::from(g) - mg, f64::from(t) - mt);
-        sgt += g * t;
-        sgg += g * g;
-        stt += t * t;
-        sd += (g - t) * (g - t);
-    }
-    (sgt / (sgg * stt).sqrt(), (sd / n).sqrt())
 }

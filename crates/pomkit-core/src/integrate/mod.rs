@@ -242,6 +242,25 @@ impl Integrated {
     }
 }
 
+/// How close integrated heights come to true ones: Pearson's r, and the RMS of the difference
+/// once both means are taken out (the unknown constant of an integration), over two equally long
+/// lists (docs/ACCURACY.md, "Height from a normal map"). NaN when either list is constant.
+#[must_use]
+pub fn height_agreement(got: &[f32], truth: &[f32]) -> (f64, f64) {
+    let n = got.len() as f64;
+    let mg = got.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+    let mt = truth.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+    let (mut sgt, mut sgg, mut stt, mut sd) = (0.0, 0.0, 0.0, 0.0);
+    for (&g, &t) in got.iter().zip(truth) {
+        let (g, t) = (f64::from(g) - mg, f64::from(t) - mt);
+        sgt += g * t;
+        sgg += g * g;
+        stt += t * t;
+        sd += (g - t) * (g - t);
+    }
+    (sgt / (sgg * stt).sqrt(), (sd / n).sqrt())
+}
+
 /// The slopes `(dz/dx, dz/drow)` of a unit tangent-space normal (+Y up), in texel widths per
 /// texel: `(-n.x / n.z, n.y / n.z)`, with `n.z` kept at least `1 / MAX_SLOPE` and each slope
 /// within `MAX_SLOPE` in magnitude.
@@ -638,22 +657,6 @@ mod tests {
     use crate::bake::{NormalBakeOptions, bake_normals, decode_rgb8, encode_rgb8};
     use std::f32::consts::TAU;
 
-    /// Pearson's r and the RMS of the difference with the means taken out.
-    fn compare(got: &[f32], truth: &[f32]) -> (f64, f64) {
-        let n = got.len() as f64;
-        let mg = got.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
-        let mt = truth.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
-        let (mut sgt, mut sgg, mut stt, mut sd) = (0.0, 0.0, 0.0, 0.0);
-        for (&g, &t) in got.iter().zip(truth) {
-            let (g, t) = (f64::from(g) - mg, f64::from(t) - mt);
-            sgt += g * t;
-            sgg += g * g;
-            stt += t * t;
-            sd += (g - t) * (g - t);
-        }
-        (sgt / (sgg * stt).sqrt(), (sd / n).sqrt())
-    }
-
     /// The exact normal of the height `z` (texel widths) with slopes `dz/dx`, `dz/drow`: the
     /// inverse of [`slopes`], +Y up (so y is the slope up the image, `-dz/drow`).
     fn normal_of(dzdx: f32, dzdrow: f32) -> Vec3 {
@@ -689,7 +692,7 @@ mod tests {
         }
         for method in [IntegrateMethod::Poisson, IntegrateMethod::Weighted] {
             let out = run(w, h, &normals, EdgeMode::Wrap, method);
-            let (r, rms) = compare(out.heights(), &truth);
+            let (r, rms) = height_agreement(out.heights(), &truth);
             assert!(r > 0.999, "{method:?}: r = {r}");
             // Against a relief of 10 texel widths: the trapezoidal rule's error on these slopes.
             assert!(rms < 0.05, "{method:?}: RMS {rms} texel widths");
@@ -716,7 +719,7 @@ mod tests {
         }
         for method in [IntegrateMethod::Poisson, IntegrateMethod::Weighted] {
             let out = run(w, h, &normals, EdgeMode::Clamp, method);
-            let (r, rms) = compare(out.heights(), &truth);
+            let (r, rms) = height_agreement(out.heights(), &truth);
             assert!(r > 0.9999, "{method:?}: r = {r}");
             // A quadratic is integrated exactly by the trapezoidal rule (float error only); the
             // weighted solve's amplitude fit leaves a little more, on a relief of 40 texel widths.
@@ -724,7 +727,7 @@ mod tests {
             assert!(rms < limit, "{method:?}: RMS {rms} texel widths");
         }
         // Wrap on a map that does not tile cannot: the tilt has nowhere to go.
-        let (r, _) = compare(run(w, h, &normals, EdgeMode::Wrap, IntegrateMethod::Poisson).heights(), &truth);
+        let (r, _) = height_agreement(run(w, h, &normals, EdgeMode::Wrap, IntegrateMethod::Poisson).heights(), &truth);
         assert!(r < 0.9, "wrap on a non-tiling map: r = {r}");
     }
 
@@ -743,11 +746,11 @@ mod tests {
         let normals = bake_normals(&field, &opts).unwrap();
         let truth: Vec<f32> = field.heights().iter().map(|v| v * scale).collect();
         let out = run(w, h, &normals, EdgeMode::Clamp, IntegrateMethod::Poisson);
-        let (r, rms) = compare(out.heights(), &truth);
+        let (r, rms) = height_agreement(out.heights(), &truth);
         assert!(r > 0.9999 && rms < 0.01, "r = {r}, RMS {rms}");
         // Through RGB8 as written to a file: within quantization.
         let q: Vec<Vec3> = normals.iter().map(|&n| decode_rgb8(encode_rgb8(n))).collect();
-        let (r, _) = compare(run(w, h, &q, EdgeMode::Clamp, IntegrateMethod::Poisson).heights(), &truth);
+        let (r, _) = height_agreement(run(w, h, &q, EdgeMode::Clamp, IntegrateMethod::Poisson).heights(), &truth);
         assert!(r > 0.999, "rgb8: r = {r}");
         // The brightest corner is the bottom right one, the darkest the top left.
         let hs = out.normalized();
@@ -789,8 +792,9 @@ mod tests {
                 normals.push(decode_rgb8(encode_rgb8(ns.normalize())));
             }
         }
-        let plain = compare(run(n, n, &normals, EdgeMode::Clamp, IntegrateMethod::Poisson).heights(), &truth);
-        let weighted = compare(run(n, n, &normals, EdgeMode::Clamp, IntegrateMethod::Weighted).heights(), &truth);
+        let plain = height_agreement(run(n, n, &normals, EdgeMode::Clamp, IntegrateMethod::Poisson).heights(), &truth);
+        let weighted =
+            height_agreement(run(n, n, &normals, EdgeMode::Clamp, IntegrateMethod::Weighted).heights(), &truth);
         // Measured: plain r 0.9923, RMS 0.243 texel widths; weighted r 0.9959, RMS 0.202.
         assert!(plain.0 > 0.99 && plain.1 < 0.3, "plain: {plain:?}");
         assert!(weighted.0 > plain.0 + 0.002, "weighted r {} vs plain {}", weighted.0, plain.0);

@@ -27,10 +27,7 @@ pub(super) fn add_folder_materials(f: &mut SceneFile, base: &Path) {
             continue;
         }
         if base.join(value).is_dir() {
-            let at = match &o.name {
-                Some(n) => format!("object {} ({n:?})", i + 1),
-                None => format!("object {}", i + 1),
-            };
+            let at = o.label(i);
             f.material.push(MaterialFile {
                 name: Some(value.clone()),
                 folder: Some(value.clone()),

@@ -237,21 +237,9 @@ impl Loader<'_> {
         objects: &mut Vec<Object>,
     ) -> Result<(), SceneError> {
         let name = o.name.clone().unwrap_or_else(|| format!("object {}", i + 1));
-        let at = match &o.name {
-            Some(n) => format!("object {} ({n:?})", i + 1),
-            None => format!("object {}", i + 1),
-        };
-        let given = [
-            ("uv_repeat", o.uv_repeat.is_some()),
-            ("size", o.size.is_some()),
-            ("radius", o.radius.is_some()),
-            ("height", o.height.is_some()),
-            ("tube_radius", o.tube_radius.is_some()),
-            ("segments", o.segments.is_some()),
-            ("rings", o.rings.is_some()),
-            ("tube_segments", o.tube_segments.is_some()),
-        ];
-        if let Some((field, _)) = given.iter().find(|(_, set)| *set) {
+        let at = o.label(i);
+        let mut given = [("uv_repeat", o.uv_repeat.is_some())].into_iter().chain(o.shape_keys());
+        if let Some((field, _)) = given.find(|(_, set)| *set) {
             return Err(self.invalid(
                 &at,
                 field,

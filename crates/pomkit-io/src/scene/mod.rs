@@ -446,6 +446,29 @@ struct ObjectFile {
     tube_segments: Option<u32>,
 }
 
+impl ObjectFile {
+    /// `object N` or `object N ("NAME")`: where errors about the `i`-th object (from 0) point.
+    fn label(&self, i: usize) -> String {
+        match &self.name {
+            Some(n) => format!("object {} ({n:?})", i + 1),
+            None => format!("object {}", i + 1),
+        }
+    }
+
+    /// The built-in shapes' keys and whether the table sets each.
+    fn shape_keys(&self) -> [(&'static str, bool); 7] {
+        [
+            ("size", self.size.is_some()),
+            ("radius", self.radius.is_some()),
+            ("height", self.height.is_some()),
+            ("tube_radius", self.tube_radius.is_some()),
+            ("segments", self.segments.is_some()),
+            ("rings", self.rings.is_some()),
+            ("tube_segments", self.tube_segments.is_some()),
+        ]
+    }
+}
+
 /// One number for every component, or one per component.
 #[derive(Deserialize, Clone, Copy)]
 #[serde(untagged, expecting = "expected a number or an array of numbers")]

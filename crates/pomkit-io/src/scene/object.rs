@@ -5,10 +5,7 @@ use super::*;
 impl Loader<'_> {
     pub(super) fn object(&mut self, i: usize, o: &ObjectFile, materials: &[Material]) -> Result<Object, SceneError> {
         let name = o.name.clone().unwrap_or_else(|| format!("object {}", i + 1));
-        let at = match &o.name {
-            Some(n) => format!("object {} ({n:?})", i + 1),
-            None => format!("object {}", i + 1),
-        };
+        let at = o.label(i);
         let at = at.as_str();
         let Some(wanted) = &o.material else {
             return Err(self.invalid(
@@ -72,15 +69,7 @@ impl Loader<'_> {
     /// The object's mesh: a built-in shape with its parameters, or a file (cached).
     fn mesh(&mut self, at: &str, o: &ObjectFile) -> Result<Arc<Mesh>, SceneError> {
         let shape = o.mesh.trim().to_ascii_lowercase();
-        let given: [(&str, bool); 7] = [
-            ("size", o.size.is_some()),
-            ("radius", o.radius.is_some()),
-            ("height", o.height.is_some()),
-            ("tube_radius", o.tube_radius.is_some()),
-            ("segments", o.segments.is_some()),
-            ("rings", o.rings.is_some()),
-            ("tube_segments", o.tube_segments.is_some()),
-        ];
+        let given = o.shape_keys();
         let takes: &[&str] = match shape.as_str() {
             "plane" => &["size", "segments"],
             "quad" => &["size"],
