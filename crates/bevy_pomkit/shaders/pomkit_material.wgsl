@@ -22,7 +22,7 @@
     PomkitParams, PomkitHit, pomkit_tangent_frame, pomkit_uv_scale, pomkit_view_ray, pomkit_light_ray,
     pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_shadow,
     pomkit_hit_position, pomkit_pixel_depth, pomkit_safe_normalize, POMKIT_FLAT, POMKIT_NORMAL,
-    POMKIT_SHADOW_NONE,
+    POMKIT_SHADOW_NONE, pomkit_to_tangent, pomkit_view_curvature, pomkit_trace_curved,
 }
 
 #ifdef PREPASS_PIPELINE
@@ -121,6 +121,12 @@ struct Traced {
     translation: vec2<f32>,
     /// Texture reads of the trace.
     fetches: u32,
+    /// How deep the hit lies along the straight view ray below the polygon, in depth units
+    /// (what pixel depth offset moves the depth by): the hit's depth, except under a curved
+    /// surface (silhouettes).
+    ray_depth: f32,
+    /// Silhouettes: the ray left the relief without meeting it, and the fragment is discarded.
+    left: bool,
 }
 
 /// A world vector in the library's ray terms, as the tangent-space vector that
@@ -145,9 +151,12 @@ fn ray_terms(w: vec3<f32>, s: Traced) -> vec3<f32> {
 }
 
 /// Traces the view ray of this fragment (for whichever view renders: camera or light).
-fn trace_fragment(in: VertexOutput) -> Traced {
+/// `curvature` is the mesh's curvature form at the fragment (silhouettes; zero otherwise).
+fn trace_fragment(in: VertexOutput, curvature: vec3<f32>) -> Traced {
     var s: Traced;
     s.ready = false;
+    s.ray_depth = 0.0;
+    s.left = false;
     s.weight = 0.0;
     s.lod = 0.0;
     s.fetches = 0u;
@@ -167,6 +176,7 @@ fn trace_fragment(in: VertexOutput) -> Traced {
     s.duv_dx = dpdx(uv);
     s.duv_dy = dpdy(uv);
 #ifdef VERTEX_TANGENTS
+#ifdef VERTEX_NORMALS
     let draw_dx = dpdx(in.uv);
     let draw_dy = dpdy(in.uv);
     let dw_dx = dpdx(in.world_position.xyz);
@@ -199,25 +209,51 @@ fn trace_fragment(in: VertexOutput) -> Traced {
     s.dpdv = du_raw * s.minv[1].x + dv_raw * s.minv[1].y;
     s.uv_scale = vec2<f32>(length(s.dpdu), length(s.dpdv));
     s.ready = (pomkit.flags & FLAG_READY) != 0u;
+#ifdef POMKIT_PLAIN
+    // A silhouette material on a mesh without the curvature attribute (reported by the plugin).
+    s.ready = false;
+#endif
     s.lod = pomkit_mip_level(pomkit_heights, s.duv_dx, s.duv_dy);
 #ifdef POMKIT_LOD_FADE
     s.weight = pomkit_lod_weight(s.lod, pomkit.params.lod_threshold);
 #else
     s.weight = 1.0;
 #endif
-    if displaces() && s.ready && s.weight > 0.0 {
+#ifdef POMKIT_SILHOUETTE
+    // The outline is decided wherever the mesh is drawn, beyond the LOD band too (the rim of
+    // a curved mesh is where the mip level is highest).
+    let trace = true;
+#else
+    let trace = s.weight > 0.0;
+#endif
+    if displaces() && s.ready && trace {
         let p = params();
         let ray = pomkit_view_ray(ray_terms(-s.to_eye, s), vec2<f32>(1.0));
+#ifdef POMKIT_SILHOUETTE
+        // The curvature along the ray, in the vertex's own frame (B = w cross(N, T), as the
+        // plugin fitted it), with K's UV unit made the material's: uv_transform scales it by
+        // 1 / sqrt(|det|).
+        let k = curvature * inverseSqrt(max(abs(dm), 1e-30));
+        let c = pomkit_view_curvature(pomkit_to_tangent(f, -s.to_eye), k, p.depth_scale);
+        let curved = pomkit_trace_curved(TECHNIQUE, pomkit_heights, pomkit_pyramid, pomkit_sampler, p, uv, ray, s.lod, c);
+        var hit = curved.hit;
+        s.ray_depth = curved.ray_depth;
+        s.left = curved.left;
+#else
         var hit = pomkit_trace(TECHNIQUE, pomkit_heights, pomkit_pyramid, pomkit_sampler, p, uv, ray, s.lod);
+        s.ray_depth = hit.depth;
+#endif
         s.fetches = hit.fetches;
 #ifdef POMKIT_LOD_FADE
         // The LOD band shades once, at the hit moved toward the entry point by the fade weight
         // (and raised toward the polygon by it): the picture fades continuously to the
         // untraced surface, at the cost of one shading instead of two.
         hit = PomkitHit(mix(uv, hit.uv, s.weight), hit.depth * s.weight, hit.fetches);
+        s.ray_depth *= s.weight;
 #endif
         s.hit = hit;
     }
+#endif
 #endif
 #endif
     return s;
@@ -248,8 +284,8 @@ fn traced_depth(in: VertexOutput, s: Traced) -> f32 {
     let polygon = in.position.z;
 #endif
 #ifdef POMKIT_PIXEL_DEPTH
-    if s.ready && s.hit.depth > 0.0 {
-        let p = pomkit_hit_position(in.world_position.xyz, s.to_eye, s.n, s.hit.depth, pomkit.params.depth_scale, s.uv_scale);
+    if s.ready && s.ray_depth > 0.0 {
+        let p = pomkit_hit_position(in.world_position.xyz, s.to_eye, s.n, s.ray_depth, pomkit.params.depth_scale, s.uv_scale);
         // Bevy's depth buffers are reverse-Z (near = 1).
         return pomkit_pixel_depth(p, view.clip_from_world, polygon, true);
     }
@@ -395,8 +431,18 @@ struct PomkitPrepassOutput {
 @early_depth_test(less_equal)
 #endif
 @fragment
-fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> PomkitPrepassOutput {
-    let s = trace_fragment(in);
+fn fragment(
+    in: VertexOutput,
+    @builtin(front_facing) is_front: bool,
+#ifdef POMKIT_SILHOUETTE
+    @location(10) curvature: vec3<f32>,
+#endif
+) -> PomkitPrepassOutput {
+#ifdef POMKIT_SILHOUETTE
+    let s = trace_fragment(in, curvature);
+#else
+    let s = trace_fragment(in, vec3<f32>(0.0));
+#endif
     pbr_prepass_functions::prepass_alpha_discard(in);
     var out: PomkitPrepassOutput;
 #ifdef POMKIT_FRAG_DEPTH
@@ -426,6 +472,11 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> PomkitPr
 #endif
 #ifdef MOTION_VECTOR_PREPASS
     out.motion_vector = pbr_prepass_functions::calculate_motion_vector(in.world_position, in.previous_world_position);
+#endif
+#ifdef POMKIT_SILHOUETTE
+    if s.left {
+        discard;
+    }
 #endif
     return out;
 }
@@ -613,8 +664,18 @@ fn lit(in: VertexOutput, s: Traced, p: pbr_types::PbrInput) -> Lit {
 #endif
 #endif
 @fragment
-fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> PomkitFragmentOutput {
-    let s = trace_fragment(in);
+fn fragment(
+    in: VertexOutput,
+    @builtin(front_facing) is_front: bool,
+#ifdef POMKIT_SILHOUETTE
+    @location(10) curvature: vec3<f32>,
+#endif
+) -> PomkitFragmentOutput {
+#ifdef POMKIT_SILHOUETTE
+    let s = trace_fragment(in, curvature);
+#else
+    let s = trace_fragment(in, vec3<f32>(0.0));
+#endif
     var out: PomkitFragmentOutput;
 #ifdef POMKIT_PIXEL_DEPTH
     out.frag_depth = traced_depth(in, s);
@@ -631,6 +692,13 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> PomkitFr
     out.color = vec4<f32>(l.visibility, s.weight, 0.0, 1.0);
 #else
     out.color = pbr_functions::main_pass_post_lighting_processing(p, l.color);
+#endif
+#ifdef POMKIT_SILHOUETTE
+    // A ray that left the relief: what lies behind shows (discarded last, after every
+    // derivative and implicit-gradient sample of the shading).
+    if s.left {
+        discard;
+    }
 #endif
     return out;
 }

@@ -51,12 +51,14 @@
 pub mod gltf;
 pub mod height;
 mod material;
+mod silhouette;
 
 pub use height::{Channel, HeightImageError, MapKind};
 pub use material::{Pomkit, PomkitDebug, PomkitKey, PomkitUniform};
 pub use pomkit_core::EdgeMode;
 pub use pomkit_core::shadow::{ShadowMode, ShadowParams};
 pub use pomkit_core::trace::{Technique, TraceParams};
+pub use silhouette::{ATTRIBUTE_CURVATURE, CurvatureError, mesh_curvature};
 
 use bevy::asset::{AssetEvent, AssetId, Assets, Handle, uuid_handle};
 use bevy::image::Image;
@@ -77,6 +79,10 @@ pub const LIBRARY_SHADER: Handle<Shader> = uuid_handle!("6f2a4c55-3b0e-4a3e-9d0c
 
 /// The material extension's shader (forward pass, prepass, deferred G-buffer and shadow passes).
 pub const MATERIAL_SHADER: Handle<Shader> = uuid_handle!("0b8e41d2-7c4f-4f5b-a1c6-2e9d3f6a8b21");
+
+/// The vertex stage of silhouette materials' pipelines (forward pass and prepass): Bevy's,
+/// plus [`ATTRIBUTE_CURVATURE`] passed on to the fragment stage.
+pub const SILHOUETTE_VERTEX_SHADER: Handle<Shader> = uuid_handle!("3c1f7a9e-52d4-4b8a-8e6f-d40b7c2a5e93");
 
 /// The import path of [`LIBRARY_SHADER`].
 pub const LIBRARY_IMPORT_PATH: &str = "pomkit::library";
@@ -156,7 +162,13 @@ impl Plugin for PomkitPlugin {
         let library = Shader::from_wgsl(library_module_source(), "bevy_pomkit/pomkit_library.wgsl");
         let material =
             Shader::from_wgsl(include_str!("../shaders/pomkit_material.wgsl"), "bevy_pomkit/pomkit_material.wgsl");
-        for (id, shader) in [(LIBRARY_SHADER.id(), library), (MATERIAL_SHADER.id(), material)] {
+        let vertex = Shader::from_wgsl(
+            include_str!("../shaders/pomkit_silhouette_vertex.wgsl"),
+            "bevy_pomkit/pomkit_silhouette_vertex.wgsl",
+        );
+        for (id, shader) in
+            [(LIBRARY_SHADER.id(), library), (MATERIAL_SHADER.id(), material), (SILHOUETTE_VERTEX_SHADER.id(), vertex)]
+        {
             if let Err(e) = shaders.insert(id, shader) {
                 error!("bevy_pomkit: could not register a shader: {e}");
             }
@@ -166,7 +178,7 @@ impl Plugin for PomkitPlugin {
         gltf::register(app, maps.gltf_reports.clone());
         app.add_plugins(MaterialPlugin::<PomkitMaterial>::default())
             .insert_resource(maps)
-            .add_systems(PostUpdate, (build_height_maps, check_meshes));
+            .add_systems(PostUpdate, (build_height_maps, check_meshes, silhouette::prepare_curvature));
     }
 
     fn finish(&self, app: &mut App) {

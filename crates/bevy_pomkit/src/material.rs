@@ -21,8 +21,8 @@ use pomkit_core::trace::{Technique, TraceParams};
 use pomkit_gpu::library::{ParamError, PomkitParams, shadow_index, technique_index};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::MATERIAL_SHADER;
 use crate::height::{Channel, MapKind};
+use crate::{ATTRIBUTE_CURVATURE, MATERIAL_SHADER, SILHOUETTE_VERTEX_SHADER};
 
 /// What the material outputs instead of its shaded colour, for inspection and tests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -105,6 +105,14 @@ pub struct Pomkit {
     pub entry_gradients: bool,
     /// Debug output instead of the shaded colour.
     pub debug: PomkitDebug,
+    /// Bumpy outlines on curved meshes (default off): the view ray is bent under the curved
+    /// surface the mesh's normals describe, and pixels whose ray leaves the relief are
+    /// discarded, in the main pass, the depth prepass, the deferred G-buffer and the shadow
+    /// maps of point and spot lights (and of directional lights with `shadow_pixel_depth`).
+    /// The plugin gives the meshes drawn with such a material the
+    /// [`ATTRIBUTE_CURVATURE`](crate::ATTRIBUTE_CURVATURE) it needs. A pipeline
+    /// specialisation: off, the material's pipelines are exactly those without it.
+    pub silhouette: bool,
     /// What the plugin's log messages call this material (the glTF hook sets `glTF "FILE",
     /// material "NAME"`). `None`: its asset path, or its id.
     pub name: Option<String>,
@@ -146,6 +154,7 @@ impl Pomkit {
             normals: true,
             entry_gradients: true,
             debug: PomkitDebug::Off,
+            silhouette: false,
             name: None,
             heights: None,
             pyramid: None,
@@ -166,6 +175,13 @@ impl Pomkit {
     #[must_use]
     pub fn with_shadow(mut self, mode: pomkit_core::shadow::ShadowMode) -> Self {
         self.shadow.mode = mode;
+        self
+    }
+
+    /// The same with silhouettes on or off ([`Pomkit::silhouette`]).
+    #[must_use]
+    pub fn with_silhouette(mut self, silhouette: bool) -> Self {
+        self.silhouette = silhouette;
         self
     }
 
@@ -288,6 +304,8 @@ pub struct PomkitKey {
     pub point_lights: bool,
     /// [`Pomkit::entry_gradients`].
     pub entry_gradients: bool,
+    /// [`Pomkit::silhouette`].
+    pub silhouette: bool,
 }
 
 impl From<&Pomkit> for PomkitKey {
@@ -306,6 +324,7 @@ impl From<&Pomkit> for PomkitKey {
             textures: m.base_textures,
             point_lights: m.point_lights,
             entry_gradients: m.entry_gradients,
+            silhouette: m.silhouette,
         }
     }
 }
@@ -390,19 +409,63 @@ impl MaterialExtension for Pomkit {
         // Only directional lights' shadow passes set this key (their cascades are orthographic).
         let directional_shadow = key.mesh_key.contains(MeshPipelineKey::UNCLIPPED_DEPTH_ORTHO);
         let pixel_depth = k.pixel_depth_offset && (k.shadow_pixel_depth || !directional_shadow);
-        let prepass = descriptor.vertex.shader_defs.iter().any(|d| d == &ShaderDefVal::from("PREPASS_PIPELINE"));
-        if prepass && pixel_depth {
-            // The prepass and shadow passes trace too, to write the traced depth: they need the
-            // normals and tangents Bevy's prepass vertex stage passes on only for a normal
-            // prepass, and a fragment stage even where no colour target is written.
+        let vertex_def = |name: &str| descriptor.vertex.shader_defs.iter().any(|d| d == &ShaderDefVal::from(name));
+        let prepass = vertex_def("PREPASS_PIPELINE");
+        // Silhouettes wherever the pass traces (directional shadow maps only with
+        // `shadow_pixel_depth`), on meshes that carry the curvature and that the GPU does not
+        // move (the silhouette vertex stage neither skins nor morphs).
+        let silhouette = k.silhouette && (k.shadow_pixel_depth || !directional_shadow);
+        let curved = silhouette
+            && layout.0.contains(ATTRIBUTE_CURVATURE)
+            && !vertex_def("SKINNED")
+            && !vertex_def("MORPH_TARGETS");
+        if prepass && (pixel_depth || curved) {
+            // The prepass and shadow passes trace too, to write the traced depth or to discard
+            // what the main pass discards: they need the normals and tangents Bevy's prepass
+            // vertex stage passes on only for a normal prepass, and a fragment stage even where
+            // no colour target is written.
             add_prepass_fragment(descriptor, layout)?;
         }
+        if curved {
+            add_curvature(descriptor, layout)?;
+        }
         if let Some(f) = descriptor.fragment.as_mut() {
-            let defs = k.shader_defs(&f.shader_defs, pixel_depth);
+            let mut defs = k.shader_defs(&f.shader_defs, pixel_depth);
+            if curved {
+                defs.push("POMKIT_SILHOUETTE".into());
+                // A depth-only pass's fragment stage needs an output.
+                if prepass && !defs.iter().any(|d| shader_def_name(d) == "POMKIT_FRAG_DEPTH") {
+                    defs.push("POMKIT_FRAG_DEPTH".into());
+                }
+            } else if silhouette {
+                // No curvature (reported by the plugin): the plain standard material.
+                defs.push("POMKIT_PLAIN".into());
+            }
             f.shader_defs.extend(defs);
         }
         Ok(())
     }
+}
+
+/// The shader location of [`ATTRIBUTE_CURVATURE`] in the silhouette vertex stage (after Bevy's
+/// own, 0 to 7, in both the forward and the prepass vertex layouts).
+const CURVATURE_LOCATION: u32 = 8;
+
+/// Makes a pipeline read [`ATTRIBUTE_CURVATURE`]: the attribute added to its vertex buffer, and
+/// the silhouette vertex stage (Bevy's, plus the curvature passed on) in place of Bevy's.
+fn add_curvature(
+    descriptor: &mut RenderPipelineDescriptor,
+    layout: &MeshVertexBufferLayoutRef,
+) -> Result<(), SpecializedMeshPipelineError> {
+    let curvature = layout.0.get_layout(&[ATTRIBUTE_CURVATURE.at_shader_location(CURVATURE_LOCATION)])?;
+    match descriptor.vertex.buffers.first_mut() {
+        Some(buffer) => buffer.attributes.extend(curvature.attributes),
+        None => descriptor.vertex.buffers.push(curvature),
+    }
+    descriptor.vertex.shader = SILHOUETTE_VERTEX_SHADER;
+    descriptor.vertex.entry_point = None;
+    descriptor.vertex.shader_defs.push("POMKIT_SILHOUETTE".into());
+    Ok(())
 }
 
 /// Makes a prepass or shadow pass pipeline trace: the vertex stage passes on normals and
