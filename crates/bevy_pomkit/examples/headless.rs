@@ -17,6 +17,14 @@
 //! ```text
 //! cargo run --release -p bevy_pomkit --example headless -- --gltf scene.gltf --technique relief -o relief.png
 //! ```
+//!
+//! `--silhouette` turns on silhouettes (`Pomkit::silhouette`) for every traced material;
+//! `--spheres` draws pomkit's cobblestone sphere twice instead of the demo scene, on the left
+//! without silhouettes and on the right with them:
+//!
+//! ```text
+//! cargo run --release -p bevy_pomkit --example headless -- --spheres --width 640 --height 300 -o spheres.png
+//! ```
 
 #[cfg(feature = "gltf")]
 #[path = "support/gltf.rs"]
@@ -25,12 +33,16 @@ mod gltf;
 mod headless;
 #[path = "support/scene.rs"]
 mod scene;
+#[path = "support/sphere.rs"]
+mod sphere;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use bevy::camera::RenderTarget;
+use bevy::prelude::*;
+use bevy_pomkit::PomkitMaterial;
 use clap::Parser;
 use pomkit_core::procedural::Pattern;
 
@@ -57,6 +69,13 @@ struct Args {
     /// Turn pixel depth offset off.
     #[arg(long)]
     no_pixel_depth: bool,
+    /// Silhouettes: bumpy outlines on curved meshes.
+    #[arg(long)]
+    silhouette: bool,
+    /// Draw pomkit's cobblestone sphere twice, without silhouettes (left) and with them
+    /// (right), instead of the demo scene.
+    #[arg(long, conflicts_with = "gltf")]
+    spheres: bool,
     /// Image width.
     #[arg(long, default_value_t = 960)]
     width: u32,
@@ -97,6 +116,7 @@ fn run(args: &Args) -> Result<(), String> {
         args.shadow.as_deref().map(str::parse).transpose().map_err(|e| format!("--shadow: {e}"))?;
     let (mut app, name) = match &args.gltf {
         Some(file) => gltf_scene(args, file, shadow)?,
+        None if args.spheres => spheres_scene(args, shadow)?,
         None => demo_scene(args, shadow)?,
     };
     let frame = app.frame(Duration::from_secs(600)).map_err(|e| e.to_string())?;
@@ -124,7 +144,64 @@ fn demo_scene(args: &Args, shadow: Option<bevy_pomkit::ShadowMode>) -> Result<(h
     let mut app = headless::Headless::new(args.width, args.height);
     let target = RenderTarget::Image(app.target().into());
     scene::spawn(app.world(), Some(target), &opts);
+    // The cube's and the floor's material.
+    let mut materials = app.world().resource_mut::<Assets<PomkitMaterial>>();
+    let ids: Vec<_> = materials.ids().collect();
+    for id in ids {
+        if let Some(mut m) = materials.get_mut(id) {
+            m.extension.silhouette = args.silhouette;
+        }
+    }
     Ok((app, method.name()))
+}
+
+/// pomkit's cobblestone sphere (the silhouette tests' unit sphere, depth scale 0.04 unless
+/// `--depth-scale`), twice: without silhouettes on the left, with them on the right, lit by a
+/// sun on a grey background.
+fn spheres_scene(args: &Args, shadow: Option<bevy_pomkit::ShadowMode>) -> Result<(headless::Headless, String), String> {
+    let technique: bevy_pomkit::Technique = match args.technique.as_deref() {
+        None => bevy_pomkit::Technique::Pom,
+        Some(t) => t.parse().map_err(|e| format!("--technique: {e} (with --spheres, a pomkit technique)"))?,
+    };
+    let pattern: Pattern = args.pattern.parse().map_err(|e| format!("--pattern: {e}"))?;
+    let mut app = headless::Headless::new(args.width, args.height);
+    let world = app.world();
+    let size = 512;
+    let albedo = world.resource_mut::<Assets<Image>>().add(scene::albedo_image(pattern, size));
+    let heights = world
+        .resource_mut::<Assets<Image>>()
+        .add(bevy_pomkit::height::depth_image(&pomkit_core::procedural::generate(pattern, size, size)));
+    let mesh = world.resource_mut::<Assets<Mesh>>().add(sphere::cobblestone_sphere());
+    let base =
+        StandardMaterial { base_color_texture: Some(albedo), perceptual_roughness: 0.8, reflectance: 0.3, ..default() };
+    for (x, silhouette) in [(-1.15, false), (1.15, true)] {
+        let mut ext = bevy_pomkit::Pomkit::new(heights.clone())
+            .with_technique(technique)
+            .with_shadow(shadow.unwrap_or(bevy_pomkit::ShadowMode::Soft))
+            .with_depth_scale(args.depth_scale.unwrap_or(0.04))
+            .with_silhouette(silhouette);
+        ext.map_kind = bevy_pomkit::MapKind::Depth;
+        ext.pixel_depth_offset = !args.no_pixel_depth;
+        let material =
+            world.resource_mut::<Assets<PomkitMaterial>>().add(PomkitMaterial { base: base.clone(), extension: ext });
+        world.spawn((Mesh3d(mesh.clone()), MeshMaterial3d(material), Transform::from_xyz(x, 0.0, 0.0)));
+    }
+    world.spawn((
+        DirectionalLight { illuminance: 8000.0, ..default() },
+        Transform::from_xyz(-2.0, 2.5, 3.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    world.insert_resource(GlobalAmbientLight { brightness: 300.0, ..default() });
+    world.insert_resource(ClearColor(Color::srgb(0.25, 0.27, 0.3)));
+    let target = RenderTarget::Image(app.target().into());
+    app.world().spawn((
+        Camera3d::default(),
+        Projection::Perspective(PerspectiveProjection { fov: 32f32.to_radians(), ..default() }),
+        Transform::from_xyz(0.0, 0.6, 4.6).looking_at(Vec3::ZERO, Vec3::Y),
+        bevy::core_pipeline::tonemapping::Tonemapping::AcesFitted,
+        Msaa::Off,
+        target,
+    ));
+    Ok((app, format!("{}, without and with silhouettes", technique.name())))
 }
 
 /// The first scene of a glTF file, with the arguments' overrides.
@@ -134,8 +211,6 @@ fn gltf_scene(
     file: &std::path::Path,
     shadow: Option<bevy_pomkit::ShadowMode>,
 ) -> Result<(headless::Headless, String), String> {
-    use bevy::prelude::*;
-    use bevy_pomkit::PomkitMaterial;
     let technique: Option<bevy_pomkit::Technique> = match args.technique.as_deref() {
         None => None,
         Some(t) => Some(t.parse().map_err(|e| format!("--technique: {e} (with --gltf, a pomkit technique)"))?),
@@ -178,6 +253,7 @@ fn gltf_scene(
             e.depth_scale = d;
         }
         e.pixel_depth_offset &= !args.no_pixel_depth;
+        e.silhouette |= args.silhouette;
     }
     let what = match technique {
         Some(t) => t.name().to_owned(),
