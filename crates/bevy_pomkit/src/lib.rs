@@ -40,7 +40,9 @@
 //! - pixel depth offset, in the main pass, the depth prepass and the deferred G-buffer, and on
 //!   request in directional lights' shadow cascades;
 //! - height maps from any Bevy `Image` of a readable format, rebuilt when the image changes;
-//! - a debug output of the hit UV, the fetch count, the LOD weight or the self-shadow.
+//! - a debug output of the hit UV, the fetch count, the LOD weight or the self-shadow;
+//! - on request ([`Pomkit::silhouette`]), the outline of the displaced surface on curved
+//!   meshes, from a per-vertex curvature ([`ATTRIBUTE_CURVATURE`]) the plugin computes.
 //!
 //! Tangent handedness: tangents from different sources (authoring tools, Bevy's
 //! `Mesh::generate_tangents`) do not always agree on the sign of `w` (docs/EMBEDDING.md,
