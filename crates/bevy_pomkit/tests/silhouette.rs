@@ -20,8 +20,9 @@ use std::time::Duration;
 
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::{Hdr, RenderTarget};
-use bevy::core_pipeline::prepass::DepthPrepass;
+use bevy::core_pipeline::prepass::{DeferredPrepass, DepthPrepass};
 use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::pbr::DefaultOpaqueRendererMethod;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy_pomkit::height::depth_image;
@@ -45,6 +46,8 @@ enum Extra {
     None,
     /// A green unlit wall behind the sphere, and a depth prepass.
     WallAndPrepass,
+    /// The same, drawn deferred (the G-buffer prepass).
+    WallDeferred,
 }
 
 /// pomkit's scene `s` (one object, one material) drawn by Bevy as `mesh` with the base
@@ -96,7 +99,11 @@ fn spawn_camera(app: &mut Headless, s: &pomkit_core::scene::Scene, extra: Extra)
         ))
         .id();
     app.world().insert_resource(ClearColor(Color::BLACK));
-    if extra == Extra::WallAndPrepass {
+    if extra == Extra::WallDeferred {
+        app.world().entity_mut(camera).insert(DeferredPrepass);
+        app.world().insert_resource(DefaultOpaqueRendererMethod::deferred());
+    }
+    if extra != Extra::None {
         app.world().entity_mut(camera).insert(DepthPrepass);
         let wall = app.world().resource_mut::<Assets<Mesh>>().add(Rectangle::new(8.0, 8.0));
         let green = app.world().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
@@ -188,30 +195,35 @@ fn silhouettes_cut_the_outline_disagreement_with_the_displaced_truth_by_70_perce
     }
 }
 
-/// With a depth prepass the prepass discards what the main pass does: behind every pixel the
-/// silhouette cuts away, the wall shows (a prepass that wrote the polygon's depth there would
-/// leave it black).
+/// With a depth prepass, and drawn deferred, the prepass discards what the main pass does:
+/// behind every pixel the silhouette cuts away, the wall shows (a prepass that wrote the
+/// polygon's depth there would leave it black).
 #[test]
-fn discarded_pixels_show_the_wall_behind_with_a_depth_prepass() {
+fn discarded_pixels_show_the_wall_behind_with_a_depth_prepass_and_deferred() {
     let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let s = scene(Shape::CobblestoneSphere, Technique::Pom, true, TEXELS);
     let mesh = bevy_mesh(&s.objects[0].mesh);
     let plain = cpu_coverage(&scene(Shape::CobblestoneSphere, Technique::Pom, false, TEXELS), Mode::Material);
-    let (frame, _) = render_bevy(&s, mesh, white, Extra::WallAndPrepass);
-    keep(&frame, "bevy-silhouette-prepass-wall.png");
-    let (mut cut, mut wall, mut sphere) = (0, 0, 0);
-    for (k, p) in frame.pixels.iter().enumerate() {
-        let white = p[0] > 0.5 && p[1] > 0.5;
-        let green = p[0] < 0.1 && p[1] > 0.5;
-        sphere += usize::from(white);
-        if plain[k] && !white {
-            cut += 1;
-            wall += usize::from(green);
+    for extra in [Extra::WallAndPrepass, Extra::WallDeferred] {
+        let what = if extra == Extra::WallDeferred { "deferred" } else { "depth prepass" };
+        let (frame, _) = render_bevy(&s, mesh.clone(), white, extra);
+        keep(&frame, &format!("bevy-silhouette-wall-{}.png", what.replace(' ', "-")));
+        let (mut cut, mut wall, mut sphere) = (0, 0, 0);
+        for (k, p) in frame.pixels.iter().enumerate() {
+            let white = p[0] > 0.5 && p[1] > 0.5;
+            let green = p[0] < 0.1 && p[1] > 0.5;
+            sphere += usize::from(white);
+            if plain[k] && !white {
+                cut += 1;
+                wall += usize::from(green);
+            }
         }
+        eprintln!(
+            "{what}: {sphere} sphere pixels; {cut} inside the mesh's outline cut away, {wall} of them show the wall"
+        );
+        assert!(cut > 200, "{what}: only {cut} pixels cut away");
+        assert_eq!(wall, cut, "{what}: cut-away pixels that do not show the wall");
     }
-    eprintln!("{sphere} sphere pixels; {cut} inside the mesh's outline cut away, {wall} of them show the wall");
-    assert!(cut > 200, "only {cut} pixels cut away");
-    assert_eq!(wall, cut, "cut-away pixels that do not show the wall");
 }
 
 /// An unlit image whose red and green are the UV: a traced surface shows other colours than
