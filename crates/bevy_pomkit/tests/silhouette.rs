@@ -48,6 +48,10 @@ enum Extra {
     WallAndPrepass,
     /// The same, drawn deferred (the G-buffer prepass).
     WallDeferred,
+    /// A lit green wall behind the sphere, in the shadow of a point light (no ambient light).
+    PointShadow,
+    /// The same with a sun, and `shadow_pixel_depth` (the cascades trace).
+    SunShadow,
 }
 
 /// pomkit's scene `s` (one object, one material) drawn by Bevy as `mesh` with the base
@@ -70,6 +74,12 @@ fn render_bevy(
     ext.edges = m.edges;
     ext.trace = m.trace;
     ext.lod_threshold = m.lod_threshold;
+    if matches!(extra, Extra::PointShadow | Extra::SunShadow) {
+        // The shadow passes trace and discard without writing the traced depth: with it, this
+        // sphere's shadow passes crash Mesa 22.3.6's lavapipe (silhouettes on or off).
+        ext.pixel_depth_offset = false;
+        ext.shadow_pixel_depth = extra == Extra::SunShadow;
+    }
     let material = app.world().resource_mut::<Assets<PomkitMaterial>>().add(PomkitMaterial { base, extension: ext });
     let mesh = app.world().resource_mut::<Assets<Mesh>>().add(mesh);
     app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
@@ -103,15 +113,35 @@ fn spawn_camera(app: &mut Headless, s: &pomkit_core::scene::Scene, extra: Extra)
         app.world().entity_mut(camera).insert(DeferredPrepass);
         app.world().insert_resource(DefaultOpaqueRendererMethod::deferred());
     }
-    if extra != Extra::None {
+    let shadows = matches!(extra, Extra::PointShadow | Extra::SunShadow);
+    if matches!(extra, Extra::WallAndPrepass | Extra::WallDeferred) {
         app.world().entity_mut(camera).insert(DepthPrepass);
+    }
+    if extra != Extra::None {
         let wall = app.world().resource_mut::<Assets<Mesh>>().add(Rectangle::new(8.0, 8.0));
         let green = app.world().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
             base_color: Color::srgb(0.0, 1.0, 0.0),
-            unlit: true,
+            unlit: !shadows,
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
             ..default()
         });
         app.world().spawn((Mesh3d(wall), MeshMaterial3d(green), Transform::from_xyz(0.0, 0.0, -1.5)));
+    }
+    if shadows {
+        app.world().insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    }
+    if extra == Extra::PointShadow {
+        app.world().spawn((
+            PointLight { intensity: 4.0e6, range: 30.0, radius: 0.0, shadow_maps_enabled: true, ..default() },
+            Transform::from_xyz(2.6, 0.9, 2.2),
+        ));
+    }
+    if extra == Extra::SunShadow {
+        app.world().spawn((
+            DirectionalLight { illuminance: 3000.0, shadow_maps_enabled: true, ..default() },
+            Transform::default().looking_to(Vec3::new(-1.0, -0.35, -1.0), Vec3::Y),
+        ));
     }
 }
 
@@ -293,4 +323,42 @@ fn meshes_without_curvature_are_reported_and_drawn_plain() {
     eprintln!("the intact sphere: {differ} pixels differ from the plain material");
     assert!(reports.is_empty(), "{reports:?}");
     assert!(differ > 500, "the intact sphere is not traced ({differ} pixels differ)");
+}
+
+/// The shadow maps of point lights, and of directional lights with `shadow_pixel_depth`, hold
+/// the cut outline: the sphere's shadow on the wall behind it shrinks with silhouettes (the
+/// rays the main pass lets through reach the wall from the light too). Counted on the wall
+/// pixels seen in both pictures (the cut sphere uncovers some wall).
+#[test]
+fn shadow_maps_see_the_silhouette() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let mesh = bevy_mesh(&scene(Shape::CobblestoneSphere, Technique::Pom, false, TEXELS).objects[0].mesh);
+    for extra in [Extra::PointShadow, Extra::SunShadow] {
+        let what = if extra == Extra::PointShadow { "point light" } else { "sun" };
+        let mut frames = Vec::new();
+        for silhouette in [false, true] {
+            let s = scene(Shape::CobblestoneSphere, Technique::Pom, silhouette, TEXELS);
+            let (frame, _) = render_bevy(&s, mesh.clone(), white, extra);
+            keep(&frame, &format!("bevy-silhouette-shadow-{}-{silhouette}.png", what.replace(' ', "-")));
+            frames.push(frame);
+        }
+        // Wall pixels (not the white sphere), and whether any light reaches them.
+        let wall = |p: &[f32; 4]| p[0] < 0.1;
+        let dark = |p: &[f32; 4]| p[1] < 1e-3;
+        let (mut shadowed, mut lit_now, mut shadowed_now) = (0, 0, 0);
+        for (a, b) in frames[0].pixels.iter().zip(&frames[1].pixels) {
+            if wall(a) && wall(b) {
+                shadowed += usize::from(dark(a));
+                lit_now += usize::from(dark(a) && !dark(b));
+                shadowed_now += usize::from(!dark(a) && dark(b));
+            }
+        }
+        eprintln!(
+            "{what}: {shadowed} wall pixels in the sphere's shadow without silhouettes; with them {lit_now} of these \
+             lit, {shadowed_now} others shadowed"
+        );
+        assert!(shadowed > 1000, "{what}: the sphere casts too little shadow on the wall ({shadowed} pixels)");
+        assert!(lit_now > 40, "{what}: the shadow does not shrink with silhouettes ({lit_now} pixels lit)");
+        assert!(shadowed_now * 10 < lit_now, "{what}: {shadowed_now} pixels newly shadowed");
+    }
 }
