@@ -362,3 +362,48 @@ fn shadow_maps_see_the_silhouette() {
         assert!(shadowed_now * 10 < lit_now, "{what}: {shadowed_now} pixels newly shadowed");
     }
 }
+
+/// The plugin computes the curvature when a mesh is first drawn with a silhouette material, and
+/// again when its vertices change: the attribute holds pomkit-core's values for the mesh as it
+/// is (a sphere, then the same asset made a cylinder).
+#[test]
+fn the_curvature_follows_the_mesh() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let s = scene(Shape::CobblestoneSphere, Technique::Pom, true, 64);
+    let mut app = Headless::new(W, H);
+    let heights =
+        app.world().resource_mut::<Assets<Image>>().add(depth_image(s.materials[0].height.as_ref().expect("a map")));
+    let material = app.world().resource_mut::<Assets<PomkitMaterial>>().add(PomkitMaterial {
+        base: StandardMaterial::default(),
+        extension: Pomkit::new(heights).with_silhouette(true),
+    });
+    let sphere = bevy_mesh(&pomkit_core::mesh::Mesh::uv_sphere(1.0, 12, 24));
+    let cylinder = bevy_mesh(&pomkit_core::mesh::Mesh::cylinder(0.5, 2.0, 16));
+    let handle = app.world().resource_mut::<Assets<Mesh>>().add(sphere.clone());
+    app.world().spawn((Mesh3d(handle.clone()), MeshMaterial3d(material)));
+    let stored = |app: &mut Headless| -> Option<Vec<[f32; 3]>> {
+        match app.world().resource::<Assets<Mesh>>().get(&handle)?.attribute(bevy_pomkit::ATTRIBUTE_CURVATURE)? {
+            bevy::mesh::VertexAttributeValues::Float32x3(k) => Some(k.clone()),
+            _ => None,
+        }
+    };
+    for (mesh, name) in [(sphere, "sphere"), (cylinder, "cylinder")] {
+        let want = bevy_pomkit::mesh_curvature(&mesh).expect("the curvature");
+        if name == "cylinder" {
+            *app.world().resource_mut::<Assets<Mesh>>().get_mut(&handle).expect("the mesh") = mesh;
+        }
+        let mut got = None;
+        for _ in 0..5 {
+            app.update();
+            got = stored(&mut app);
+            if got.as_ref() == Some(&want) {
+                break;
+            }
+        }
+        let got = got.unwrap_or_default();
+        eprintln!("{name}: {} curvature values stored, {} expected", got.len(), want.len());
+        assert_eq!(got, want, "{name}: the stored curvature is not the mesh's");
+        // A sphere of radius r curves by L / r in every direction away from the poles: not zero.
+        assert!(want.iter().any(|k| k[0] > 0.1), "{name}: a flat curvature cannot tell the meshes apart");
+    }
+}
