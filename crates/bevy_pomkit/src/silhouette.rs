@@ -210,3 +210,80 @@ pub(crate) fn prepare_curvature(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bevy::asset::RenderAssetUsages;
+
+    /// pomkit-core's sphere as a Bevy mesh, with or without its index list.
+    fn sphere(indexed: bool) -> (pomkit_core::mesh::Mesh, Mesh) {
+        let core = pomkit_core::mesh::Mesh::uv_sphere(1.0, 8, 16);
+        let at = |i: usize| if indexed { i } else { core.indices[i] as usize };
+        let n = if indexed { core.positions.len() } else { core.indices.len() };
+        let mut mesh = Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
+            .with_inserted_attribute(
+                Mesh::ATTRIBUTE_POSITION,
+                (0..n).map(|i| core.positions[at(i)].to_array()).collect::<Vec<_>>(),
+            )
+            .with_inserted_attribute(
+                Mesh::ATTRIBUTE_NORMAL,
+                (0..n).map(|i| core.normals[at(i)].to_array()).collect::<Vec<_>>(),
+            )
+            .with_inserted_attribute(
+                Mesh::ATTRIBUTE_UV_0,
+                (0..n).map(|i| core.uvs[at(i)].to_array()).collect::<Vec<_>>(),
+            )
+            .with_inserted_attribute(
+                Mesh::ATTRIBUTE_TANGENT,
+                (0..n).map(|i| core.tangents[at(i)].to_array()).collect::<Vec<_>>(),
+            );
+        if indexed {
+            mesh.insert_indices(Indices::U16(core.indices.iter().map(|&i| i as u16).collect()));
+        }
+        (core, mesh)
+    }
+
+    #[test]
+    fn the_curvature_is_pomkit_cores_for_indexed_and_unindexed_meshes() {
+        let (core, mesh) = sphere(true);
+        let want: Vec<[f32; 3]> =
+            pomkit_core::silhouette::vertex_curvature(&core).into_iter().map(|k| k.to_array()).collect();
+        // The same up to rounding (the tangents pass through `Mesh::with_tangents` once more).
+        let close = |a: [f32; 3], b: [f32; 3]| {
+            (glam::Vec3::from_array(a) - glam::Vec3::from_array(b)).abs().max_element() < 1e-5
+        };
+        let k = mesh_curvature(&mesh).expect("indexed");
+        assert_eq!(k.len(), want.len());
+        for (v, (a, b)) in k.iter().zip(&want).enumerate() {
+            assert!(close(*a, *b), "vertex {v}: {a:?} vs {b:?}");
+        }
+        // Without indices every corner is its own vertex, and alone it has two neighbours, too
+        // few to fit: pomkit-core's seam welding joins the copies at one position, so every
+        // corner is curved like its vertex (up to the length of a UV unit, which each copy takes
+        // from its own triangle: within 30% here, on 8 x 16 quads).
+        let (_, flat) = sphere(false);
+        let k = mesh_curvature(&flat).expect("unindexed");
+        for (corner, &v) in core.indices.iter().enumerate() {
+            let (a, b) = (k[corner][0], want[v as usize][0]);
+            assert!((a - b).abs() <= 0.3 * b, "corner {corner}: K_tt {a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn what_cannot_be_fitted_is_named() {
+        let (_, mesh) = sphere(true);
+        let strip = Mesh::new(PrimitiveTopology::TriangleStrip, RenderAssetUsages::default())
+            .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, vec![[0.0f32; 3]; 4]);
+        assert!(matches!(mesh_curvature(&strip), Err(CurvatureError::Topology(PrimitiveTopology::TriangleStrip))));
+        let mut bare = mesh.clone();
+        bare.remove_attribute(Mesh::ATTRIBUTE_TANGENT);
+        assert!(matches!(mesh_curvature(&bare), Err(CurvatureError::Missing("TANGENT"))));
+        let mut nan = mesh;
+        if let Some(VertexAttributeValues::Float32x3(p)) = nan.attribute_mut(Mesh::ATTRIBUTE_POSITION) {
+            p[3] = [f32::NAN; 3];
+        }
+        let e = mesh_curvature(&nan).expect_err("a NaN position");
+        assert!(e.to_string().contains("vertex 3"), "{e}");
+    }
+}
