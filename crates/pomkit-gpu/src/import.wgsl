@@ -17,10 +17,14 @@ const ENCODING_HEIGHT: u32 = 0u;
 /// `Params::encoding`: the texture holds depths (white = deep): d = value.
 const ENCODING_DEPTH: u32 = 1u;
 
+/// `Params::channel`: the Rec. 709 luma of R, G and B, `0.2126 R + 0.7152 G + 0.0722 B` (for
+/// formats with all three; pomkit's command line and bevy_pomkit read colour height maps so).
+const CHANNEL_LUMA: u32 = 4u;
+
 struct Params {
     /// Texels to write (the host texture's mip 0 size, equal to `heights` mip 0's).
     size: vec2<u32>,
-    /// Which channel holds the heights: 0 = R, 1 = G, 2 = B, 3 = A.
+    /// Which channel holds the heights: 0 = R, 1 = G, 2 = B, 3 = A, or CHANNEL_LUMA.
     channel: u32,
     /// `ENCODING_HEIGHT` or `ENCODING_DEPTH`.
     encoding: u32,
@@ -62,7 +66,10 @@ fn import_main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let texel = textureLoad(source, vec2<i32>(id.xy), 0);
-    let value = texel[min(params.channel, 3u)];
+    var value = texel[min(params.channel, 3u)];
+    if params.channel == CHANNEL_LUMA {
+        value = 0.2126 * texel.r + 0.7152 * texel.g + 0.0722 * texel.b;
+    }
     var depth: f32;
     if params.encoding == ENCODING_DEPTH {
         // NaN is the deepest point: depth 1.
