@@ -210,7 +210,9 @@ fn write_rain(
             BindGroupEntry { binding: 1, resource: p.uniform.as_entire_binding() },
         ],
     );
-    let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("rain"), timestamp_writes: None });
+    let mut pass = ctx
+        .command_encoder()
+        .begin_compute_pass(&ComputePassDescriptor { label: Some("rain"), timestamp_writes: None });
     pass.set_pipeline(&p.pipeline);
     pass.set_bind_group(0, &*group, &[]);
     pass.dispatch_workgroups(size.div_ceil(8), size.div_ceil(8), 1);
@@ -320,7 +322,8 @@ fn headless_picture(args: &Args, frames: u32) -> Result<(), String> {
     }
     let png = image::RgbaImage::from_raw(frame.width, frame.height, frame.to_srgb8())
         .ok_or("the frame's size does not match its pixels")?;
-    png.save_with_format(&args.output, image::ImageFormat::Png).map_err(|e| format!("{}: {e}", args.output.display()))?;
+    png.save_with_format(&args.output, image::ImageFormat::Png)
+        .map_err(|e| format!("{}: {e}", args.output.display()))?;
     println!("wrote {} ({}x{}, {frames} frames of rain)", args.output.display(), frame.width, frame.height);
     Ok(())
 }
@@ -352,9 +355,12 @@ fn rebuild_bench(args: &Args) -> Result<(), String> {
     let (warm_up, frames) = (5, 31);
     let (w, h) = (160, 90);
     let mut results = Vec::new();
-    for (label, gpu, rebuild) in
-        [("GPU, built every frame", true, true), ("GPU, built once", true, false), ("CPU, built every frame", false, true), ("CPU, built once", false, false)]
-    {
+    for (label, gpu, rebuild) in [
+        ("GPU, built every frame", true, true),
+        ("GPU, built once", true, false),
+        ("CPU, built every frame", false, true),
+        ("CPU, built once", false, false),
+    ] {
         let mut app = headless::Headless::new(w, h);
         let target = RenderTarget::Image(app.target().into());
         app.world().spawn((Camera3d::default(), Tonemapping::AcesFitted, camera_transform(), target));

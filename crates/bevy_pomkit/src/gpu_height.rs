@@ -30,11 +30,10 @@ use bevy::render::extract_resource::ExtractResource;
 use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::{
     BindGroupEntry, BindGroupLayout, BindGroupLayoutEntry, BindingResource, BindingType, BufferBinding,
-    BufferInitDescriptor, BufferSize, BufferUsages, ComputePassDescriptor, ComputePipeline, DownlevelFlags,
-    Extent3d, PipelineCompilationOptions, PipelineLayoutDescriptor, RawComputePipelineDescriptor,
-    ShaderModuleDescriptor, ShaderSource, ShaderStages, StorageTextureAccess, Texture, TextureDescriptor,
-    TextureDimension, TextureFormat, TextureSampleType, TextureUsages, TextureView, TextureViewDescriptor,
-    TextureViewDimension,
+    BufferInitDescriptor, BufferSize, BufferUsages, ComputePassDescriptor, ComputePipeline, DownlevelFlags, Extent3d,
+    PipelineCompilationOptions, PipelineLayoutDescriptor, RawComputePipelineDescriptor, ShaderModuleDescriptor,
+    ShaderSource, ShaderStages, StorageTextureAccess, Texture, TextureDescriptor, TextureDimension, TextureFormat,
+    TextureSampleType, TextureUsages, TextureView, TextureViewDescriptor, TextureViewDimension,
 };
 use bevy::render::renderer::{RenderAdapter, RenderContext, RenderDevice};
 use bevy::render::texture::GpuImage;
@@ -155,7 +154,10 @@ pub(crate) struct GpuHeightJobs(pub Vec<GpuJob>);
 /// Problems only the render world sees (a source texture whose size or format no longer
 /// matches), handed back to the main world: (the job's heights image, the message).
 #[derive(Resource, Clone, Default)]
-pub(crate) struct GpuReports(pub Arc<Mutex<Vec<(AssetId<Image>, String)>>>);
+pub(crate) struct GpuReports(Arc<Mutex<Vec<GpuReport>>>);
+
+/// A job's heights image and the message about its source.
+type GpuReport = (AssetId<Image>, String);
 
 impl GpuReports {
     fn push(&self, id: AssetId<Image>, message: String) {
@@ -164,7 +166,7 @@ impl GpuReports {
         }
     }
 
-    pub(crate) fn take(&self) -> Vec<(AssetId<Image>, String)> {
+    pub(crate) fn take(&self) -> Vec<GpuReport> {
         self.0.lock().map(|mut v| std::mem::take(&mut *v)).unwrap_or_default()
     }
 }
@@ -444,20 +446,15 @@ pub(crate) fn build_gpu_heights(
         let size = (source.texture_descriptor.size.width, source.texture_descriptor.size.height);
         let mut problem = None;
         if size != job.size {
-            problem = Some(format!(
-                "its size changed from {}x{} to {}x{} texels",
-                job.size.0, job.size.1, size.0, size.1
-            ));
+            problem =
+                Some(format!("its size changed from {}x{} to {}x{} texels", job.size.0, job.size.1, size.0, size.1));
         } else if job.view_format.is_some_and(|f| !source.texture_descriptor.view_formats.contains(&f)) {
             // The texture with the linear view format is on its way.
             continue;
         }
         if let Some(p) = problem {
             state.reported.insert(job.heights);
-            reports.push(
-                job.heights,
-                format!("bevy_pomkit: {}: {p}: drawing the plain StandardMaterial", job.name),
-            );
+            reports.push(job.heights, format!("bevy_pomkit: {}: {p}: drawing the plain StandardMaterial", job.name));
             continue;
         }
         let record = state.records.get(&job.heights);
@@ -564,8 +561,8 @@ fn encode(
         BindingResource::TextureView(v)
     }
 
-    let mut pass =
-        encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("pomkit height build"), timestamp_writes: None });
+    let mut pass = encoder
+        .begin_compute_pass(&ComputePassDescriptor { label: Some("pomkit height build"), timestamp_writes: None });
     let mut dispatch = |stage: &Stage, resources: &[BindingResource<'_>], (dw, dh): (u32, u32)| {
         let entries: Vec<BindGroupEntry<'_>> = resources
             .iter()

@@ -175,7 +175,7 @@ impl Plugin for PomkitPlugin {
         .init_resource::<gpu_height::GpuHeightJobs>()
         .insert_resource(maps.gpu_reports.clone())
         .insert_resource(maps)
-            .add_systems(PostUpdate, (build_height_maps, check_meshes));
+        .add_systems(PostUpdate, (build_height_maps, check_meshes));
     }
 
     fn finish(&self, app: &mut App) {
@@ -320,7 +320,8 @@ impl HeightMaps {
         whose: &str,
         name: &str,
     ) -> Result<Textures, String> {
-        let plain = |e: String| format!("bevy_pomkit: {whose}height map {name}: {e}: drawing the plain StandardMaterial");
+        let plain =
+            |e: String| format!("bevy_pomkit: {whose}height map {name}: {e}: drawing the plain StandardMaterial");
         let Some(source) = images.get(key.source) else {
             return Err(plain("it is not loaded".into()));
         };
@@ -409,7 +410,6 @@ fn image_name(server: Option<&AssetServer>, id: AssetId<Image>) -> String {
 /// Point and spot lights (whose self-shadows a material's shader carries only where some exist).
 type PointOrSpot = Or<(With<PointLight>, With<SpotLight>)>;
 
-#[expect(clippy::too_many_arguments, reason = "a Bevy system's parameters")]
 fn build_height_maps(
     point_lights: Query<(), PointOrSpot>,
     mut materials: ResMut<Assets<PomkitMaterial>>,
@@ -425,7 +425,8 @@ fn build_height_maps(
     // GPU builds whose source the render world could not read: reported, drawn plain.
     for (heights, message) in maps.gpu_reports.take() {
         maps.report(message);
-        let failed: Vec<Built> = maps.gpu.iter().filter(|(_, j)| j.heights == heights).map(|(k, _)| k.clone()).collect();
+        let failed: Vec<Built> =
+            maps.gpu.iter().filter(|(_, j)| j.heights == heights).map(|(k, _)| k.clone()).collect();
         for key in failed {
             maps.gpu.remove(&key);
             maps.cache.remove(&key);

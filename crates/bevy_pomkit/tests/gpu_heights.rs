@@ -219,9 +219,8 @@ fn gpu_built_levels_equal_pomkit_core() {
         if k == 0 {
             compare("mip 0 depth (the import, bit for bit)", &channel(values, 4, 0), cpu_d.depths(), |_| 0.0);
         }
-        let e = compare(&format!("mip {k} depth"), &channel(values, 4, 0), cpu_d.depths(), |v| {
-            levels * f16_half_step(v)
-        });
+        let e =
+            compare(&format!("mip {k} depth"), &channel(values, 4, 0), cpu_d.depths(), |v| levels * f16_half_step(v));
         worst_depth = worst_depth.max(e);
         let e = compare(&format!("mip {k} parallax"), &channel(values, 4, 1), cpu_p.depths(), |v| {
             levels * f16_half_step(v)
@@ -270,7 +269,8 @@ fn picture(field: &HeightField, build: HeightBuild, technique: Technique) -> Fra
     assert!(reports.is_empty(), "reports: {reports:?}");
     // Built where asked: the GPU writes Rgba16Float heights, the CPU R16Float.
     let world = app.world();
-    let [heights, ..] = world.resource::<Assets<PomkitMaterial>>().get(&material).unwrap().extension.height_textures().unwrap();
+    let [heights, ..] =
+        world.resource::<Assets<PomkitMaterial>>().get(&material).unwrap().extension.height_textures().unwrap();
     let format = world.resource::<Assets<Image>>().get(heights).unwrap().texture_descriptor.format;
     let want = if build == HeightBuild::Cpu { TextureFormat::R16Float } else { TextureFormat::Rgba16Float };
     assert_eq!(format, want, "{build:?}: heights built elsewhere");
@@ -280,12 +280,8 @@ fn picture(field: &HeightField, build: HeightBuild, technique: Technique) -> Fra
 /// Largest and mean difference of two pictures' colours, and the share of pixels off by more
 /// than `limit`.
 fn difference(a: &Frame, b: &Frame, limit: f32) -> (f32, f32, f32) {
-    let d: Vec<f32> = a
-        .pixels
-        .iter()
-        .zip(&b.pixels)
-        .map(|(p, q)| (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0, f32::max))
-        .collect();
+    let d: Vec<f32> =
+        a.pixels.iter().zip(&b.pixels).map(|(p, q)| (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0, f32::max)).collect();
     let worst = d.iter().copied().fold(0.0, f32::max);
     let mean = d.iter().sum::<f32>() / d.len() as f32;
     let off = d.iter().filter(|&&v| v > limit).count() as f32 / d.len() as f32;
@@ -370,4 +366,49 @@ fn a_storage_texture_of_the_wrong_format_or_size_draws_plain_and_says_why() {
         );
         assert_eq!(reports.len(), 1, "{case}: one message: {reports:?}");
     }
+}
+
+#[test]
+fn an_srgb_colour_image_imports_its_stored_luma_as_the_cpu_reads_it() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    // An 8-bit sRGB PNG's stored values, not decoded: the heights are data. Every texel's three
+    // channels differ, so a wrong channel, a missing luma or an sRGB decode shows.
+    let (w, h) = (23u32, 17u32);
+    let data: Vec<u8> = (0..w * h)
+        .flat_map(|k| {
+            let (x, y) = (k % w, k / w);
+            [(x * 11 + y * 3) as u8, (y * 14 + x * 5) as u8, ((x * y * 7) % 251) as u8, 255]
+        })
+        .collect();
+    let image = Image::new(
+        Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        data,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::default(),
+    );
+    let cpu = bevy_pomkit::height::depths_from_image(&image, MapKind::Height, bevy_pomkit::Channel::Luma)
+        .expect("the CPU reads it");
+    let mut app = Headless::new(48, 36);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let source = app.world().resource_mut::<Assets<Image>>().add(image);
+    let ext = Pomkit::new(source).with_height_build(HeightBuild::Gpu);
+    let material = app
+        .world()
+        .resource_mut::<Assets<PomkitMaterial>>()
+        .add(PomkitMaterial { base: StandardMaterial::default(), extension: ext });
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
+    spawn_camera(&mut app);
+    app.frame(TIMEOUT).expect("frame");
+    let reports = app.world().resource::<HeightMaps>().reports();
+    assert!(reports.is_empty(), "reports: {reports:?}");
+    let [heights, ..] = app
+        .world()
+        .resource::<Assets<PomkitMaterial>>()
+        .get(&material)
+        .and_then(|m| m.extension.height_textures())
+        .expect("the GPU textures are made");
+    let gpu = channel(&read_mips(&mut app, heights)[0].2, 4, 0);
+    let worst = compare("mip 0 depth from the luma", &gpu, cpu.depths(), |v| f16_half_step(v) + 1e-6);
+    eprintln!("{w}x{h} Rgba8UnormSrgb, luma: worst difference from the CPU's depths {worst:.2e}");
 }
