@@ -607,3 +607,59 @@ fn encode(
         dispatch(&p.pyramid_base, &r, (w, h));
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(w: u32, h: u32, format: TextureFormat, usage: RenderAssetUsages) -> Image {
+        let mut image = Image::new_uninit(
+            Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+            TextureDimension::D2,
+            format,
+            usage,
+        );
+        image.texture_descriptor.usage = TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING;
+        image
+    }
+
+    #[test]
+    fn sources_the_import_cannot_read_are_refused_with_the_reason() {
+        let gpu = RenderAssetUsages::RENDER_WORLD;
+        let refused = |i: &Image, c: Channel| check_source(i, c).err().unwrap_or_default();
+        assert!(refused(&image(8, 8, TextureFormat::R32Uint, gpu), Channel::Luma).contains("format R32Uint"));
+        assert!(refused(&image(8, 8, TextureFormat::Depth32Float, gpu), Channel::R).contains("Depth32Float"));
+        assert!(refused(&image(0, 8, TextureFormat::R32Float, gpu), Channel::R).contains("0x8 texels"));
+        assert!(
+            refused(&image(8, 8, TextureFormat::R32Float, RenderAssetUsages::MAIN_WORLD), Channel::R)
+                .contains("main world only")
+        );
+        assert!(refused(&image(8, 8, TextureFormat::R32Float, gpu), Channel::A).contains("no alpha"));
+        let mut unbound = image(8, 8, TextureFormat::R32Float, gpu);
+        unbound.texture_descriptor.usage = TextureUsages::STORAGE_BINDING;
+        assert!(refused(&unbound, Channel::R).contains("TEXTURE_BINDING"));
+    }
+
+    #[test]
+    fn channels_follow_the_cpu_reading() {
+        let gpu = RenderAssetUsages::RENDER_WORLD;
+        let channel = |f: TextureFormat, c: Channel| check_source(&image(4, 4, f, gpu), c).map(|s| s.channel);
+        // Luma of colour formats; the one channel of grey ones (as the CPU reads them).
+        assert_eq!(channel(TextureFormat::Rgba16Float, Channel::Luma), Ok(CHANNEL_LUMA));
+        assert_eq!(channel(TextureFormat::R16Float, Channel::Luma), Ok(0));
+        assert_eq!(channel(TextureFormat::Rg8Unorm, Channel::B), Ok(0));
+        assert_eq!(channel(TextureFormat::Rgba8Unorm, Channel::A), Ok(3));
+        // sRGB: read through the linear view, which the texture must list.
+        let srgb = check_source(&image(4, 4, TextureFormat::Rgba8UnormSrgb, gpu), Channel::R).unwrap();
+        assert_eq!(srgb.view_format, Some(TextureFormat::Rgba8Unorm));
+        assert_eq!(srgb.needs_view_format, Some(&[TextureFormat::Rgba8Unorm][..]));
+    }
+
+    #[test]
+    fn without_a_device_that_runs_compute_passes_the_cpu_builds() {
+        // No render app in a unit test: nothing was detected.
+        assert!(!gpu_heights_supported());
+        assert_eq!(effective(HeightBuild::GpuEveryFrame), HeightBuild::Cpu);
+        assert_eq!(effective(HeightBuild::Cpu), HeightBuild::Cpu);
+    }
+}
