@@ -17,18 +17,22 @@ use bevy::asset::RenderAssetUsages;
 use bevy::camera::{Hdr, RenderTarget};
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::prelude::*;
-use bevy::render::RenderApp;
 use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::{
-    BufferDescriptor, BufferUsages, CommandEncoderDescriptor, Extent3d, MapMode, Origin3d, PollType,
+    BindGroupEntry, BindGroupLayout, BindGroupLayoutEntry, BindingResource, BindingType, Buffer, BufferBindingType,
+    BufferDescriptor, BufferSize, BufferUsages, CommandEncoderDescriptor, ComputePassDescriptor, ComputePipeline,
+    Extent3d, MapMode, Origin3d, PipelineCompilationOptions, PipelineLayoutDescriptor, PollType,
+    RawComputePipelineDescriptor, ShaderModuleDescriptor, ShaderSource, ShaderStages, StorageTextureAccess,
     TexelCopyBufferInfo, TexelCopyBufferLayout, TexelCopyTextureInfo, TextureAspect, TextureDimension, TextureFormat,
-    TextureUsages,
+    TextureUsages, TextureViewDescriptor, TextureViewDimension,
 };
-use bevy::render::renderer::{RenderDevice, RenderQueue};
+use bevy::render::renderer::{RenderContext, RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue};
 use bevy::render::texture::GpuImage;
+use bevy::render::{Extract, ExtractSchedule, RenderApp};
 use bevy_pomkit::height::depth_image;
 use bevy_pomkit::{
-    HeightBuild, HeightMaps, MapKind, Pomkit, PomkitMaterial, ShadowMode, Technique, gpu_heights_supported,
+    GpuHeightPass, HeightBuild, HeightMaps, MapKind, Pomkit, PomkitMaterial, ShadowMode, Technique,
+    gpu_heights_supported,
 };
 use headless::{Frame, Headless};
 use pomkit_core::bake::{NormalBakeOptions, NormalFilter, bake_normals};
@@ -411,4 +415,165 @@ fn an_srgb_colour_image_imports_its_stored_luma_as_the_cpu_reads_it() {
     let gpu = channel(&read_mips(&mut app, heights)[0].2, 4, 0);
     let worst = compare("mip 0 depth from the luma", &gpu, cpu.depths(), |v| f16_half_step(v) + 1e-6);
     eprintln!("{w}x{h} Rgba8UnormSrgb, luma: worst difference from the CPU's depths {worst:.2e}");
+}
+
+/// The stamp the test's own compute pass writes into its storage texture this frame.
+#[derive(Resource, Clone, Copy)]
+struct Stamp(u32);
+
+/// The render world's side of the test's compute pass.
+#[derive(Resource)]
+struct Writer {
+    target: AssetId<Image>,
+    stamp: u32,
+    pipeline: Option<(BindGroupLayout, ComputePipeline, Buffer)>,
+}
+
+/// The test's pass: texel (x, y) of frame `stamp` holds ((x + 3 y + 5 stamp) mod 16) / 16.
+const WRITER_WGSL: &str = "
+@group(0) @binding(0) var out: texture_storage_2d<r32float, write>;
+@group(0) @binding(1) var<uniform> stamp: vec4<u32>;
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = textureDimensions(out);
+    if id.x >= size.x || id.y >= size.y {
+        return;
+    }
+    let v = f32((id.x + 3u * id.y + 5u * stamp.x) % 16u) / 16.0;
+    textureStore(out, vec2<i32>(id.xy), vec4<f32>(v, 0.0, 0.0, 1.0));
+}
+";
+
+fn stamp_value(x: u32, y: u32, stamp: u32) -> f32 {
+    ((x + 3 * y + 5 * stamp) % 16) as f32 / 16.0
+}
+
+/// The test's compute pass, as docs/EMBEDDING.md tells a user to order it: in the render graph,
+/// before `GpuHeightPass`, recording into the frame's commands.
+fn write_stamp(
+    mut writer: ResMut<Writer>,
+    images: Res<RenderAssets<GpuImage>>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    mut ctx: RenderContext,
+) {
+    let Some(target) = images.get(writer.target) else { return };
+    let stamp = writer.stamp;
+    let (layout, pipeline, uniform) = writer.pipeline.get_or_insert_with(|| {
+        let entries = [
+            BindGroupLayoutEntry {
+                binding: 0,
+                visibility: ShaderStages::COMPUTE,
+                ty: BindingType::StorageTexture {
+                    access: StorageTextureAccess::WriteOnly,
+                    format: TextureFormat::R32Float,
+                    view_dimension: TextureViewDimension::D2,
+                },
+                count: None,
+            },
+            BindGroupLayoutEntry {
+                binding: 1,
+                visibility: ShaderStages::COMPUTE,
+                ty: BindingType::Buffer {
+                    ty: BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: BufferSize::new(16),
+                },
+                count: None,
+            },
+        ];
+        let layout = device.create_bind_group_layout("stamp", &entries);
+        let module = device.create_and_validate_shader_module(ShaderModuleDescriptor {
+            label: Some("stamp"),
+            source: ShaderSource::Wgsl(WRITER_WGSL.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&PipelineLayoutDescriptor {
+            label: Some("stamp"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&RawComputePipelineDescriptor {
+            label: Some("stamp"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: PipelineCompilationOptions::default(),
+            cache: None,
+        });
+        let uniform = device.create_buffer(&BufferDescriptor {
+            label: Some("stamp"),
+            size: 16,
+            usage: BufferUsages::UNIFORM | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        (layout, pipeline, uniform)
+    });
+    queue.write_buffer(uniform, 0, &[stamp.to_le_bytes(), [0; 4], [0; 4], [0; 4]].concat());
+    let view = target.texture.create_view(&TextureViewDescriptor::default());
+    let group = device.create_bind_group(
+        "stamp",
+        layout,
+        &[
+            BindGroupEntry { binding: 0, resource: BindingResource::TextureView(&view) },
+            BindGroupEntry { binding: 1, resource: uniform.as_entire_binding() },
+        ],
+    );
+    let size = target.texture_descriptor.size;
+    let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor::default());
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, &*group, &[]);
+    pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
+}
+
+#[test]
+fn a_texture_written_by_a_compute_pass_is_built_in_the_same_frame() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let (w, h) = (20u32, 12u32);
+    let mut app = Headless::new(48, 36);
+    let mut texture = Image::new_uninit(
+        Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        TextureFormat::R32Float,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    texture.texture_descriptor.usage = TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING;
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let source = app.world().resource_mut::<Assets<Image>>().add(texture);
+    app.world().insert_resource(Stamp(1));
+    let render = app.app().sub_app_mut(RenderApp);
+    render.insert_resource(Writer { target: source.id(), stamp: 1, pipeline: None });
+    render.add_systems(ExtractSchedule, |stamp: Extract<Res<Stamp>>, mut writer: ResMut<Writer>| {
+        writer.stamp = stamp.0;
+    });
+    render.add_systems(RenderGraph, write_stamp.in_set(RenderGraphSystems::Render).before(GpuHeightPass));
+    let mut ext = Pomkit::new(source).with_height_build(HeightBuild::GpuEveryFrame);
+    ext.map_kind = MapKind::Depth;
+    let material = app
+        .world()
+        .resource_mut::<Assets<PomkitMaterial>>()
+        .add(PomkitMaterial { base: StandardMaterial::default(), extension: ext });
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
+    spawn_camera(&mut app);
+    app.frame(TIMEOUT).expect("frame");
+    let [heights, ..] = app
+        .world()
+        .resource::<Assets<PomkitMaterial>>()
+        .get(&material)
+        .and_then(|m| m.extension.height_textures())
+        .expect("the GPU textures are made");
+    // Each frame a new stamp: the heights built in that frame hold that frame's texels.
+    for stamp in 2..5 {
+        app.world().insert_resource(Stamp(stamp));
+        app.update();
+        let mips = read_mips(&mut app, heights);
+        let gpu = channel(&mips[0].2, 4, 0);
+        let want: Vec<f32> = (0..h).flat_map(|y| (0..w).map(move |x| stamp_value(x, y, stamp))).collect();
+        compare(&format!("frame {stamp}: mip 0"), &gpu, &want, |_| 0.0);
+        // The coarsest mip is the mean, also of this frame.
+        let mean = want.iter().sum::<f32>() / want.len() as f32;
+        let top = mips.last().map(|m| m.2[0]).unwrap_or_default();
+        assert!((top - mean).abs() < 0.01, "frame {stamp}: coarsest mip {top}, mean {mean}");
+    }
+    let reports = app.world().resource::<HeightMaps>().reports();
+    assert!(reports.is_empty(), "reports: {reports:?}");
 }
