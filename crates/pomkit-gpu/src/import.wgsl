@@ -4,8 +4,9 @@
 // Reads one channel (or the Rec. 709 luma of R, G and B) of the host texture's mip 0 with
 // `textureLoad` (no sampler, so any colour format whose samples are floats works: unorm, snorm,
 // float, sRGB, filterable or not), turns it into pomkit's depth d in [0, 1] (0 = the polygon's
-// surface, 1 = the deepest point; ARCHITECTURE.md, Conventions), and writes R = d, G = B = A = 0. `HeightPasses::encode`
-// (height.wgsl) then derives G (the parallax value), the mips, the normals and the pyramid.
+// surface, 1 = the deepest point; ARCHITECTURE.md, Conventions), and writes R = d,
+// G = B = A = 0. `HeightPasses::encode` (height.wgsl) then derives G (the parallax value), the
+// mips, the normals and the pyramid.
 //
 // Same rules as `HeightMaps::upload_depths` on the CPU: values outside [0, 1] are clamped, NaN
 // becomes 1 (the deepest point), and the depth is rounded to the nearest f16 (ties to even). Infinities clamp like any other value. NaN and infinity
