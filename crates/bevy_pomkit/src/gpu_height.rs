@@ -434,6 +434,7 @@ pub(crate) fn build_gpu_heights(
     }
     let state = &mut *state;
     state.records.retain(|id, _| jobs.0.iter().any(|j| j.heights == *id));
+    state.reported.retain(|id| jobs.0.iter().any(|j| j.heights == *id));
     for job in &jobs.0 {
         let (Some(source), Some(heights), Some(pyramid), Some(normals)) =
             (images.get(job.source), images.get(job.heights), images.get(job.pyramid), images.get(job.normals))
@@ -446,6 +447,10 @@ pub(crate) fn build_gpu_heights(
         let size = (source.texture_descriptor.size.width, source.texture_descriptor.size.height);
         let mut problem = None;
         if size != job.size {
+            if !job.every_frame {
+                // An edited image of a new size: the main world makes textures of that size.
+                continue;
+            }
             problem =
                 Some(format!("its size changed from {}x{} to {}x{} texels", job.size.0, job.size.1, size.0, size.1));
         } else if job.view_format.is_some_and(|f| !source.texture_descriptor.view_formats.contains(&f)) {

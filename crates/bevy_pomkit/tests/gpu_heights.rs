@@ -610,3 +610,28 @@ fn the_ripples_example_draws_without_errors_or_warnings() {
         .collect();
     assert!(own.is_empty(), "warnings or errors: {own:#?}");
 }
+
+#[test]
+fn an_edited_image_of_a_new_size_is_built_at_that_size() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let mut app = Headless::new(48, 36);
+    let first = generate(Pattern::Bricks, 24, 24);
+    let material = spawn_quad(&mut app, render_world_image(&first), HeightBuild::Gpu, Technique::Pom);
+    spawn_camera(&mut app);
+    app.frame(TIMEOUT).expect("frame");
+    let id = app.world().resource::<Assets<PomkitMaterial>>().get(&material).unwrap().extension.height_map.id();
+    let second = generate(Pattern::Cobblestones, 20, 27);
+    app.world().resource_mut::<Assets<Image>>().insert(id, render_world_image(&second)).expect("replaced");
+    app.frame(TIMEOUT).expect("frame");
+    let reports = app.world().resource::<HeightMaps>().reports();
+    assert!(reports.is_empty(), "an edit to a new size is no error: {reports:?}");
+    let [heights, ..] = app
+        .world()
+        .resource::<Assets<PomkitMaterial>>()
+        .get(&material)
+        .and_then(|m| m.extension.height_textures())
+        .expect("the GPU textures are made");
+    let mip0 = read_mips(&mut app, heights).swap_remove(0);
+    assert_eq!((mip0.0, mip0.1), (20, 27), "the textures' size");
+    compare("mip 0 depth of the new image", &channel(&mip0.2, 4, 0), f16_field(&second).depths(), |_| 0.0);
+}
