@@ -13,10 +13,13 @@
 //! `pyramid` `Rg32Float` padded to powers of two (R the bound, G in mip 0 the cone ratios),
 //! `normals` `Rgba16Float`.
 //!
-//! The main world decides what to build (`prepare`, from `build_height_maps`) and hands the
-//! render world a list of jobs ([`GpuHeightJobs`]); the render-world system in
+//! The main world decides what to build (`HeightMaps::prepare_gpu`, from `build_height_maps`:
+//! the source checked, the images made) and hands the render world a list of jobs
+//! ([`GpuHeightJobs`]); the render-world system in
 //! [`GpuHeightPass`] records the passes of each job whose source changed (or every frame for
 //! [`HeightBuild::GpuEveryFrame`]) into the frame's command encoder, before any camera draws.
+//! What only the render world can see wrong (a texture written every frame that changed size
+//! there) goes back through [`GpuReports`], and the main world draws that material plain.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
