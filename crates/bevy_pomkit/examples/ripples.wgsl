@@ -49,15 +49,15 @@ fn rain_main(@builtin(global_invocation_id) id: vec3<u32>) {
         let t = rain.time + period * hash(i * 13u + 5u);
         let cycle = u32(floor(t / period));
         let age = t - f32(cycle) * period;
-        let seed = i * 7919u + cycle * 104729u;
-        let centre = vec2<f32>(hash(seed + 11u), hash(seed + 23u));
+        let drop_key = i * 7919u + cycle * 104729u;
+        let centre = vec2<f32>(hash(drop_key + 11u), hash(drop_key + 23u));
         // The shortest way to the centre on the tiling pond.
         let d = abs(uv - centre);
         let r = length(min(d, 1.0 - d));
         // Crests behind the front only, fading in over a wavelength ahead of it.
         let x = (r - SPEED * age) / WAVELENGTH;
         let envelope = exp(-0.06 * x * x) * select(exp(-2.0 * x * x), 1.0, x < 0.0);
-        let strength = (0.55 + 0.45 * hash(seed + 37u)) * exp(-1.1 * age) / sqrt(1.0 + r / WAVELENGTH);
+        let strength = (0.55 + 0.45 * hash(drop_key + 37u)) * exp(-1.1 * age) / sqrt(1.0 + r / WAVELENGTH);
         h += strength * envelope * cos(6.2831853 * x);
     }
     textureStore(heights, vec2<i32>(id.xy), vec4<f32>(clamp(0.5 + 0.42 * h, 0.0, 1.0), 0.0, 0.0, 1.0));
