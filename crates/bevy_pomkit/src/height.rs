@@ -305,7 +305,7 @@ fn image(w: u32, h: u32, mips: u32, format: TextureFormat, data: Vec<u8>) -> Ima
 
 /// The sampler the tracers need: bilinear within a mip and between mips, repeating where the
 /// edges wrap.
-fn sampler(edges: EdgeMode) -> ImageSamplerDescriptor {
+pub(crate) fn sampler(edges: EdgeMode) -> ImageSamplerDescriptor {
     let address = match edges {
         EdgeMode::Wrap => ImageAddressMode::Repeat,
         EdgeMode::Clamp => ImageAddressMode::ClampToEdge,

@@ -39,7 +39,9 @@
 //! - every option a pipeline specialisation (shader defs), so what is off costs nothing;
 //! - pixel depth offset, in the main pass, the depth prepass and the deferred G-buffer, and on
 //!   request in directional lights' shadow cascades;
-//! - height maps from any Bevy `Image` of a readable format, rebuilt when the image changes;
+//! - height maps from any Bevy `Image` of a readable format, rebuilt when the image changes, on
+//!   the CPU or, per material, by compute passes on the GPU ([`HeightBuild`]), also every frame
+//!   for a height map a compute shader writes;
 //! - a debug output of the hit UV, the fetch count, the LOD weight or the self-shadow;
 //! - on request ([`Pomkit::silhouette`]), the outline of the displaced surface on curved
 //!   meshes, from a per-vertex curvature ([`ATTRIBUTE_CURVATURE`]) the plugin computes.
@@ -51,10 +53,12 @@
 
 #[cfg(feature = "gltf")]
 pub mod gltf;
+mod gpu_height;
 pub mod height;
 mod material;
 mod silhouette;
 
+pub use gpu_height::{GpuHeightPass, HeightBuild, gpu_heights_supported};
 pub use height::{Channel, HeightImageError, MapKind};
 pub use material::{Pomkit, PomkitDebug, PomkitKey, PomkitUniform};
 pub use pomkit_core::EdgeMode;
@@ -178,9 +182,14 @@ impl Plugin for PomkitPlugin {
         let maps = HeightMaps::default();
         #[cfg(feature = "gltf")]
         gltf::register(app, maps.gltf_reports.clone());
-        app.add_plugins(MaterialPlugin::<PomkitMaterial>::default())
-            .insert_resource(maps)
-            .add_systems(PostUpdate, (build_height_maps, check_meshes, silhouette::prepare_curvature));
+        app.add_plugins((
+            MaterialPlugin::<PomkitMaterial>::default(),
+            bevy::render::extract_resource::ExtractResourcePlugin::<gpu_height::GpuHeightJobs>::default(),
+        ))
+        .init_resource::<gpu_height::GpuHeightJobs>()
+        .insert_resource(maps.gpu_reports.clone())
+        .insert_resource(maps)
+        .add_systems(PostUpdate, (build_height_maps, check_meshes, silhouette::prepare_curvature));
     }
 
     fn finish(&self, app: &mut App) {
@@ -191,6 +200,24 @@ impl Plugin for PomkitPlugin {
             let supported =
                 device.features().contains(bevy::render::render_resource::WgpuFeatures::SHADER_EARLY_DEPTH_TEST);
             material::CONSERVATIVE_DEPTH.store(supported, std::sync::atomic::Ordering::Relaxed);
+        }
+        // The GPU height builds: in the render graph, before the cameras draw.
+        let reports = app.world().get_resource::<gpu_height::GpuReports>().cloned();
+        if let Some(render_app) = app.get_sub_app_mut(bevy::render::RenderApp)
+            && let Some(reports) = reports
+        {
+            use bevy::render::renderer::{RenderGraph, RenderGraphSystems};
+            gpu_height::detect(render_app.world());
+            render_app
+                .insert_resource(reports)
+                .init_resource::<gpu_height::GpuHeightState>()
+                .configure_sets(
+                    RenderGraph,
+                    GpuHeightPass
+                        .in_set(RenderGraphSystems::Render)
+                        .before(bevy::core_pipeline::schedule::camera_driver),
+                )
+                .add_systems(RenderGraph, gpu_height::build_gpu_heights.in_set(GpuHeightPass));
         }
     }
 }
@@ -207,6 +234,8 @@ struct Built {
     cones: bool,
     /// Whether the heights carry parallax values (materials drawn with `iterative`).
     parallax: bool,
+    /// Where the textures are built (after the fall-back to the CPU).
+    build: HeightBuild,
 }
 
 /// Height resources of the materials in use: what each was built from, and which inputs were
@@ -220,6 +249,12 @@ pub struct HeightMaps {
     /// What the glTF hook reported while loading files.
     #[cfg(feature = "gltf")]
     gltf_reports: gltf::SharedReports,
+    /// The builds done on the GPU, by what they build.
+    gpu: HashMap<Built, gpu_height::GpuJob>,
+    /// What the render world found wrong with a GPU build's source.
+    gpu_reports: gpu_height::GpuReports,
+    /// The size each source built every frame was first built at: another size is refused.
+    gpu_sizes: HashMap<AssetId<Image>, (u32, u32)>,
 }
 
 /// The textures of one height map at one set of settings.
@@ -289,6 +324,90 @@ impl HeightMaps {
         }
     }
 
+    /// The GPU build of `key`: checks the source, makes (or reuses) the render-world images it
+    /// writes and hands the render world its job, to run again now.
+    fn prepare_gpu(
+        &mut self,
+        images: &mut Assets<Image>,
+        key: &Built,
+        cached: Option<Textures>,
+        whose: &str,
+        name: &str,
+    ) -> Result<Textures, String> {
+        let plain =
+            |e: String| format!("bevy_pomkit: {whose}height map {name}: {e}: drawing the plain StandardMaterial");
+        let Some(source) = images.get(key.source) else {
+            return Err(plain("it is not loaded".into()));
+        };
+        let info = gpu_height::check_source(source, key.channel).map_err(plain)?;
+        if let Some(formats) = info.needs_view_format {
+            // Read through a linear view: the texture must list that format, so it is made
+            // again (once) from the texels still in the main world.
+            if source.data.is_none() {
+                return Err(plain(format!(
+                    "its format {:?} is sRGB-encoded and its texels are already on the GPU (give it a linear format, or RenderAssetUsages::MAIN_WORLD)",
+                    source.texture_descriptor.format
+                )));
+            }
+            if let Some(mut image) = images.get_mut(key.source) {
+                image.texture_descriptor.view_formats = formats;
+            }
+        }
+        // Until it is built again (a refused source is not built at all).
+        let previous = self.gpu.remove(key);
+        let every_frame = key.build == HeightBuild::GpuEveryFrame;
+        if every_frame {
+            // A texture written every frame keeps its size: a new one means a source the
+            // textures (and the user's own passes) were not made for.
+            let first = *self.gpu_sizes.entry(key.source).or_insert(info.size);
+            if first != info.size {
+                return Err(plain(format!(
+                    "its size changed from {}x{} to {}x{} texels",
+                    first.0, first.1, info.size.0, info.size.1
+                )));
+            }
+        }
+        let reuse = match (&cached, &previous) {
+            (Some(t), Some(job)) if job.size == info.size => Some(t.clone()),
+            _ => None,
+        };
+        let textures = match reuse {
+            Some(t) => t,
+            None => {
+                let built = gpu_height::derived_images(info.size.0, info.size.1, key.edges);
+                let handles = cached.as_ref().map(|t| [&t.heights, &t.pyramid, &t.normals]);
+                let [heights, pyramid, normals] = gpu_height::store_images(images, handles, built);
+                let t = Textures { heights, pyramid, normals };
+                for h in [&t.heights, &t.pyramid, &t.normals] {
+                    self.derived.insert(h.id());
+                }
+                self.cache.insert(key.clone(), t.clone());
+                t
+            }
+        };
+        let generation = previous.map_or(1, |j| j.generation + 1);
+        self.gpu.insert(
+            key.clone(),
+            gpu_height::GpuJob {
+                source: key.source,
+                heights: textures.heights.id(),
+                pyramid: textures.pyramid.id(),
+                normals: textures.normals.id(),
+                size: info.size,
+                channel: info.channel,
+                encoding: gpu_height::encoding(key.kind),
+                view_format: info.view_format,
+                edges: key.edges,
+                depth_scale: want_depth_scale(f32::from_bits(key.depth_scale_bits)),
+                cones: key.cones,
+                every_frame,
+                generation,
+                name: format!("{whose}height map {name}"),
+            },
+        );
+        Ok(textures)
+    }
+
     fn report(&mut self, message: String) {
         if self.reported.insert(message.clone()) {
             error!("{message}");
@@ -311,9 +430,31 @@ fn build_height_maps(
     mut images: ResMut<Assets<Image>>,
     mut image_events: MessageReader<AssetEvent<Image>>,
     mut maps: ResMut<HeightMaps>,
+    mut gpu_jobs: ResMut<gpu_height::GpuHeightJobs>,
     server: Option<Res<AssetServer>>,
 ) {
     let server = server.as_deref();
+    let jobs_before = maps.gpu.len();
+    let mut jobs_changed = false;
+    // GPU builds whose source the render world could not read: reported, drawn plain.
+    for (heights, message) in maps.gpu_reports.take() {
+        maps.report(message);
+        let failed: Vec<Built> =
+            maps.gpu.iter().filter(|(_, j)| j.heights == heights).map(|(k, _)| k.clone()).collect();
+        for key in failed {
+            maps.gpu.remove(&key);
+            maps.cache.remove(&key);
+            jobs_changed = true;
+            let users: Vec<_> = maps.built.iter().filter(|(_, b)| **b == key).map(|(id, _)| *id).collect();
+            for id in users {
+                if let Some(mut m) = materials.get_mut(id) {
+                    m.extension.heights = None;
+                    m.extension.pyramid = None;
+                    m.extension.normal_texture = None;
+                }
+            }
+        }
+    }
     let mut changed: HashSet<AssetId<Image>> = HashSet::default();
     for event in image_events.read() {
         if let AssetEvent::Modified { id } | AssetEvent::LoadedWithDependencies { id } | AssetEvent::Added { id } =
@@ -334,6 +475,7 @@ fn build_height_maps(
             depth_scale_bits: e.depth_scale.to_bits(),
             cones: e.technique == Technique::Cone,
             parallax: e.technique == Technique::Iterative,
+            build: gpu_height::effective(e.height_build),
         };
         let stale = maps.built.get(&id) != Some(&want) || changed.contains(&want.source);
         if stale {
@@ -352,6 +494,10 @@ fn build_height_maps(
             let cached = maps.cache.get(&want).cloned();
             let r = match cached {
                 Some(t) if !changed.contains(&want.source) => Ok(t),
+                cached if want.build != HeightBuild::Cpu && images.contains(want.source) => {
+                    jobs_changed = true;
+                    maps.prepare_gpu(&mut images, &want, cached, &whose, &name)
+                }
                 cached => {
                     let Some(source) = images.get(want.source) else {
                         if let Some(s) = server
@@ -428,6 +574,12 @@ fn build_height_maps(
     maps.built.retain(|id, _| materials.contains(*id));
     let used: HashSet<Built> = maps.built.values().cloned().collect();
     maps.cache.retain(|k, _| used.contains(k));
+    maps.gpu.retain(|k, _| used.contains(k));
+    let sources: HashSet<AssetId<Image>> = used.iter().map(|k| k.source).collect();
+    maps.gpu_sizes.retain(|id, _| sources.contains(id));
+    if jobs_changed || maps.gpu.len() != jobs_before {
+        gpu_jobs.0 = maps.gpu.values().cloned().collect();
+    }
     // Parameters the tracers refuse (a depth scale that is not finite and positive, ...).
     for (id, m) in materials.iter() {
         if let Err(e) = m.extension.params() {

@@ -1,7 +1,7 @@
 //! The material extension: settings, the uniform the shader reads, and pipeline
 //! specialization (pixel depth offset, and a fragment stage in depth-only passes).
 
-use bevy::asset::Handle;
+use bevy::asset::{AssetId, Handle};
 use bevy::image::Image;
 use bevy::math::UVec4;
 use bevy::mesh::{Mesh, MeshVertexBufferLayoutRef, VertexAttributeDescriptor};
@@ -113,6 +113,10 @@ pub struct Pomkit {
     /// [`ATTRIBUTE_CURVATURE`](crate::ATTRIBUTE_CURVATURE) it needs. A pipeline
     /// specialisation: off, the material's pipelines are exactly those without it.
     pub silhouette: bool,
+    /// Where the plugin builds the textures traced from `height_map`: on the CPU (the default),
+    /// or by compute passes on the GPU when it changes or every frame
+    /// ([`HeightBuild`](crate::HeightBuild), docs/EMBEDDING.md, Height maps built on the GPU).
+    pub height_build: crate::HeightBuild,
     /// What the plugin's log messages call this material (the glTF hook sets `glTF "FILE",
     /// material "NAME"`). `None`: its asset path, or its id.
     pub name: Option<String>,
@@ -155,6 +159,7 @@ impl Pomkit {
             entry_gradients: true,
             debug: PomkitDebug::Off,
             silhouette: false,
+            height_build: crate::HeightBuild::Cpu,
             name: None,
             heights: None,
             pyramid: None,
@@ -192,6 +197,14 @@ impl Pomkit {
         self
     }
 
+    /// The same with the height textures built as `build` says (on the GPU: a source that
+    /// changes often, or one a compute shader writes every frame).
+    #[must_use]
+    pub fn with_height_build(mut self, build: crate::HeightBuild) -> Self {
+        self.height_build = build;
+        self
+    }
+
     /// The checked parameter block the shader library reads.
     ///
     /// # Errors
@@ -199,6 +212,14 @@ impl Pomkit {
     /// and positive, a sample count out of range, ...).
     pub fn params(&self) -> Result<PomkitParams, ParamError> {
         PomkitParams::new(self.technique, self.shadow, self.trace, self.depth_scale, self.edges, self.lod_threshold)
+    }
+
+    /// The heights, pyramid and normals textures the plugin made for this material (built on the
+    /// CPU, or written on the GPU by [`HeightBuild`](crate::HeightBuild)'s passes), for
+    /// inspection; `None` until made, or for a material drawn plain.
+    #[must_use]
+    pub fn height_textures(&self) -> Option<[AssetId<Image>; 3]> {
+        Some([self.heights.as_ref()?.id(), self.pyramid.as_ref()?.id(), self.normal_texture.as_ref()?.id()])
     }
 
     /// Whether the plugin has built this material's height textures.

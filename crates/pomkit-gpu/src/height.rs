@@ -444,7 +444,10 @@ impl HeightPasses {
     /// Compiles `height.wgsl` and builds its five pipelines.
     #[must_use]
     pub fn new(device: &wgpu::Device) -> Self {
-        let module = device.create_shader_module(wgpu::include_wgsl!("height.wgsl"));
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("height.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(crate::library::HEIGHT_WGSL.into()),
+        });
         let rgba16 = Slot::Storage(wgpu::TextureFormat::Rgba16Float);
         let r32 = Slot::Storage(wgpu::TextureFormat::Rg32Float);
         Self {

@@ -1,11 +1,12 @@
 // pomkit's import pass: a host program's height texture -> mip 0 of pomkit's `heights` texture
 // (crates/pomkit-gpu/src/host.rs, `HeightResource`).
 //
-// Reads one channel of the host texture's mip 0 with `textureLoad` (no sampler, so any colour
-// format whose samples are floats works: unorm, snorm, float, sRGB, filterable or not), turns it
-// into pomkit's depth d in [0, 1] (0 = the polygon's surface, 1 = the deepest point;
-// ARCHITECTURE.md, Conventions), and writes R = d, G = B = A = 0. `HeightPasses::encode`
-// (height.wgsl) then derives G (the parallax value), the mips, the normals and the pyramid.
+// Reads one channel (or the Rec. 709 luma of R, G and B) of the host texture's mip 0 with
+// `textureLoad` (no sampler, so any colour format whose samples are floats works: unorm, snorm,
+// float, sRGB, filterable or not), turns it into pomkit's depth d in [0, 1] (0 = the polygon's
+// surface, 1 = the deepest point; ARCHITECTURE.md, Conventions), and writes R = d,
+// G = B = A = 0. `HeightPasses::encode` (height.wgsl) then derives G (the parallax value), the
+// mips, the normals and the pyramid.
 //
 // Same rules as `HeightMaps::upload_depths` on the CPU: values outside [0, 1] are clamped, NaN
 // becomes 1 (the deepest point), and the depth is rounded to the nearest f16 (ties to even). Infinities clamp like any other value. NaN and infinity
@@ -17,10 +18,14 @@ const ENCODING_HEIGHT: u32 = 0u;
 /// `Params::encoding`: the texture holds depths (white = deep): d = value.
 const ENCODING_DEPTH: u32 = 1u;
 
+/// `Params::channel`: the Rec. 709 luma of R, G and B, `0.2126 R + 0.7152 G + 0.0722 B` (for
+/// formats with all three; pomkit's command line and bevy_pomkit read colour height maps so).
+const CHANNEL_LUMA: u32 = 4u;
+
 struct Params {
     /// Texels to write (the host texture's mip 0 size, equal to `heights` mip 0's).
     size: vec2<u32>,
-    /// Which channel holds the heights: 0 = R, 1 = G, 2 = B, 3 = A.
+    /// Which channel holds the heights: 0 = R, 1 = G, 2 = B, 3 = A, or CHANNEL_LUMA.
     channel: u32,
     /// `ENCODING_HEIGHT` or `ENCODING_DEPTH`.
     encoding: u32,
@@ -62,7 +67,10 @@ fn import_main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let texel = textureLoad(source, vec2<i32>(id.xy), 0);
-    let value = texel[min(params.channel, 3u)];
+    var value = texel[min(params.channel, 3u)];
+    if params.channel == CHANNEL_LUMA {
+        value = 0.2126 * texel.r + 0.7152 * texel.g + 0.0722 * texel.b;
+    }
     var depth: f32;
     if params.encoding == ENCODING_DEPTH {
         // NaN is the deepest point: depth 1.

@@ -44,6 +44,19 @@ pub const MODULES: [(&str, &str); 8] = [
 /// that are not written in Rust (a test keeps the file equal to [`flatten`]'s output).
 pub const WGSL: &str = include_str!("../shaders/pomkit.wgsl");
 
+/// The compute passes that derive everything the library reads from a depth map (`normals_main`,
+/// `resolve_main`, `downsample_main`, `pyramid_base_main`, `pyramid_reduce_main`, `cone_main`):
+/// the WGSL of `crates/pomkit-gpu/src/height.wgsl`, which the `renderer` feature's
+/// `height::HeightPasses` drives. Version-free text, so a renderer on another wgpu version (or
+/// none) can drive the same passes (bevy_pomkit does, on Bevy's wgpu); the header of the file
+/// documents each entry point's bindings.
+pub const HEIGHT_WGSL: &str = include_str!("height.wgsl");
+
+/// The import pass (`import_main`): one channel of a host texture's mip 0 (or the Rec. 709 luma
+/// of its colour channels) as depths into mip 0 of the `heights` texture that [`HEIGHT_WGSL`]
+/// derives the rest from. The WGSL of `crates/pomkit-gpu/src/import.wgsl`.
+pub const IMPORT_WGSL: &str = include_str!("import.wgsl");
+
 /// The plain-WGSL form of the library: a header, then each module of [`MODULES`] with its
 /// `import` lines removed.
 #[must_use]

@@ -21,7 +21,10 @@ impl Import {
         opts: &HeightResourceOptions,
         label: &str,
     ) -> Self {
-        let module = device.create_shader_module(wgpu::include_wgsl!("../import.wgsl"));
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("import.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(crate::library::IMPORT_WGSL.into()),
+        });
         let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
