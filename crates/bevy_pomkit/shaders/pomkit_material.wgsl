@@ -20,7 +20,7 @@
 }
 #import pomkit::library::{
     PomkitParams, PomkitHit, pomkit_tangent_frame, pomkit_uv_scale, pomkit_view_ray, pomkit_light_ray,
-    pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_shadow,
+    pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_receiver, pomkit_shadow,
     pomkit_hit_position, pomkit_pixel_depth, pomkit_safe_normalize, POMKIT_FLAT, POMKIT_NORMAL,
     POMKIT_SHADOW_NONE,
 }
@@ -63,6 +63,8 @@ struct PomkitMaterial {
     pad0: u32,
     pad1: u32,
     pad2: u32,
+    // The colour seen from afar, linear RGBA (POMKIT_FAR_COLOR).
+    far_color: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> pomkit: PomkitMaterial;
@@ -209,6 +211,9 @@ fn trace_fragment(in: VertexOutput) -> Traced {
         let p = params();
         let ray = pomkit_view_ray(ray_terms(-s.to_eye, s), vec2<f32>(1.0));
         var hit = pomkit_trace(TECHNIQUE, pomkit_heights, pomkit_pyramid, pomkit_sampler, p, uv, ray, s.lod);
+        // Steep parallax stops up to one layer below the surface: the receiver of shading, the
+        // depth self-shadow and the depth output is lifted onto it, as in pomkit's renderers.
+        hit = pomkit_receiver(TECHNIQUE, pomkit_heights, pomkit_sampler, hit, s.lod);
         s.fetches = hit.fetches;
 #ifdef POMKIT_LOD_FADE
         // The LOD band shades once, at the hit moved toward the entry point by the fade weight
@@ -315,7 +320,18 @@ fn standard_input(in: VertexOutput, is_front: bool, s: Traced) -> pbr_types::Pbr
 #endif
 #endif
 #ifdef POMKIT_TEX_BASE_COLOR
-    p.material.base_color *= textureSampleGrad(pbr_bindings::base_color_texture, pbr_bindings::base_color_sampler, uv, ddx, ddy);
+    var texel = textureSampleGrad(pbr_bindings::base_color_texture, pbr_bindings::base_color_sampler, uv, ddx, ddy);
+#else
+    var texel = vec4<f32>(1.0);
+#endif
+#ifdef POMKIT_FAR_COLOR
+    // The LOD fade fades to the colour seen from afar instead of the texture's coarse mips.
+    if s.ready {
+        texel = mix(pomkit.far_color, texel, s.weight);
+    }
+#endif
+    p.material.base_color *= texel;
+#ifdef POMKIT_TEX_BASE_COLOR
 #ifdef ALPHA_TO_COVERAGE
     if (flags & pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_RESERVED_BITS) == pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_ALPHA_TO_COVERAGE {
         // Sharpened alpha edges, as the standard material has them.
