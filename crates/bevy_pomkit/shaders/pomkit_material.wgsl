@@ -384,6 +384,11 @@ fn standard_input(in: VertexOutput, is_front: bool, s: Traced) -> pbr_types::Pbr
 #ifdef POMKIT_NORMALS
     if s.ready {
         p.N = surface_normal(s);
+#ifdef POMKIT_FAR_COLOR
+        // Seen from afar, the strands' tips make a surface along the polygon: its normal fades
+        // in with the far colour (the height map's normals, which have no mips, would alias).
+        p.N = pomkit_safe_normalize(mix(s.n, p.N, s.weight), s.n);
+#endif
     }
 #endif
     return p;
