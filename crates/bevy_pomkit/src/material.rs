@@ -112,7 +112,8 @@ pub struct Pomkit {
     /// colour texture's sample is replaced by it over the LOD band, in proportion to the fade,
     /// and beyond it entirely; it is still multiplied by `base_color` (and vertex colours), as
     /// the texture is. The depth self-shadow fades out with the technique either way. A
-    /// pipeline specialisation: unset, the shader has none of it.
+    /// pipeline specialisation: unset, the shader has none of it. A colour that is not finite
+    /// is reported once in the log and ignored.
     pub far_color: Option<Color>,
     /// Debug output instead of the shaded colour.
     pub debug: PomkitDebug,
@@ -250,7 +251,7 @@ impl AsBindGroupShaderType<PomkitUniform> for Pomkit {
         if params.is_ok() && present(&self.heights) && present(&self.pyramid) && present(&self.normal_texture) {
             out.flags |= FLAG_READY;
         }
-        if let Some(c) = self.far_color {
+        if let Some(c) = self.far_color.filter(|c| finite_color(*c)) {
             out.far_color = c.to_linear().to_vec4();
         }
         out
@@ -334,9 +335,15 @@ impl From<&Pomkit> for PomkitKey {
             textures: m.base_textures,
             point_lights: m.point_lights,
             entry_gradients: m.entry_gradients,
-            far_color: lod_fade && m.far_color.is_some(),
+            far_color: lod_fade && m.far_color.is_some_and(finite_color),
         }
     }
+}
+
+/// Whether every component of `c` (linear RGBA) is finite: a far colour that is not is
+/// reported and ignored.
+pub(crate) fn finite_color(c: Color) -> bool {
+    c.to_linear().to_f32_array().iter().all(|v| v.is_finite())
 }
 
 /// A LOD threshold at or above this mip level never fades (no height map has that many levels).
@@ -520,6 +527,8 @@ mod tests {
         assert!(has_far_color(&far));
         let never_fades = Pomkit { lod_threshold: f32::MAX, ..far.clone() };
         assert!(!has_far_color(&never_fades));
+        // A colour that is not finite is ignored (and reported by the plugin).
+        assert!(!has_far_color(&plain.clone().with_far_color(Color::linear_rgb(f32::NAN, 0.5, 0.5))));
         // The uniform carries the colour in linear RGBA.
         let want = Color::srgb(0.8, 0.6, 0.4).to_linear();
         let uniform: PomkitUniform = far.as_bind_group_shader_type(&RenderAssets::<GpuImage>::default());

@@ -53,10 +53,21 @@ fn cpu_render(scene: &Scene, (w, h): (u32, u32)) -> RenderOutput {
 /// maps), after `edit` changed what was spawned; and the camera ray of every pixel.
 fn bevy_render(
     scene: &Scene,
-    (w, h): (u32, u32),
+    size: (u32, u32),
     opts: &FurOptions,
     edit: impl FnOnce(&mut World, &fur::FurHandles),
 ) -> (Frame, Vec<Ray3d>) {
+    let (frame, rays, _) = bevy_render_reported(scene, size, opts, edit);
+    (frame, rays)
+}
+
+/// [`bevy_render`], and what the plugin reported.
+fn bevy_render_reported(
+    scene: &Scene,
+    (w, h): (u32, u32),
+    opts: &FurOptions,
+    edit: impl FnOnce(&mut World, &fur::FurHandles),
+) -> (Frame, Vec<Ray3d>, Vec<String>) {
     let mut app = Headless::new(w, h);
     let target = RenderTarget::Image(app.target().into());
     let opts = FurOptions { tonemapping: Tonemapping::None, shadow_maps: false, ..opts.clone() };
@@ -72,7 +83,8 @@ fn bevy_render(
             rays.push(cam.viewport_to_world(gt, p).expect("a ray through every pixel"));
         }
     }
-    (frame, rays)
+    let reports = app.world().resource::<bevy_pomkit::HeightMaps>().reports();
+    (frame, rays, reports)
 }
 
 /// The ball of the scene file: centre and radius.
@@ -328,4 +340,24 @@ fn a_distant_ball_shows_the_tips_colour_with_far_color_and_a_darker_average_with
         "the albedo's mean {mip_average} is not darker than the tips' colour {tips}: the test is blind"
     );
     assert!(visibility > 0.99, "the depth self-shadow does not fade out beyond the LOD band: {visibility}");
+}
+
+/// A far colour that is not a number is reported once, naming the material, and ignored: the
+/// picture is the one without it.
+#[test]
+fn a_far_colour_that_is_not_finite_is_reported_and_ignored() {
+    let _gpu = GPU.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let scene = fur::load_scene().expect("examples/scenes/fur.toml loads");
+    let size = (W / 2, H / 2);
+    let opts = FurOptions { far_color: false, ..default() };
+    let (plain, _) = bevy_render(&scene, size, &opts, |_, _| {});
+    let (bad, _, reports) = bevy_render_reported(&scene, size, &opts, |world, handles| {
+        let mut materials = world.resource_mut::<Assets<PomkitMaterial>>();
+        materials.get_mut(&handles.materials[0]).expect("material").extension.far_color =
+            Some(Color::linear_rgb(f32::NAN, 0.3, 0.2));
+    });
+    eprintln!("{reports:#?}");
+    assert_eq!(reports.len(), 1, "{reports:#?}");
+    assert!(reports[0].contains("material \"fur\"") && reports[0].contains("far_color"), "{}", reports[0]);
+    assert_eq!(plain.pixels, bad.pixels, "a far colour that is not finite changed the picture");
 }

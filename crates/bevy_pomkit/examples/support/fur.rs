@@ -212,7 +212,7 @@ pub fn spawn(world: &mut World, scene: &Scene, target: Option<RenderTarget>, opt
         ext.lod_threshold = opts.lod_threshold.unwrap_or(m.lod_threshold);
         ext.pixel_depth_offset = m.pixel_depth_offset;
         ext.debug = opts.debug;
-        ext.name = Some(format!("{}, material \"{}\"", scene_path().display(), m.name));
+        ext.name = Some(format!("examples/scenes/fur.toml, material \"{}\"", m.name));
         if opts.far_color
             && let Some(t) = tip
         {
