@@ -361,3 +361,49 @@ fn a_far_colour_that_is_not_finite_is_reported_and_ignored() {
     assert!(reports[0].contains("material \"fur\"") && reports[0].contains("far_color"), "{}", reports[0]);
     assert_eq!(plain.pixels, bad.pixels, "a far colour that is not finite changed the picture");
 }
+
+/// The `fur` example, run where `XDG_RUNTIME_DIR` is unset (a container, CI), writes its
+/// picture and logs no error or warning of its own making (Bevy's warning that lavapipe renders
+/// in software is the machine's). `cargo test` builds the examples beside the tests; a run of
+/// this file alone may not have it.
+#[test]
+fn the_fur_example_writes_its_picture_without_errors_or_warnings() {
+    let _gpu = GPU.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let exe = std::env::current_exe().expect("test binary");
+    let Some(example) = exe.parent().and_then(|deps| deps.parent()).map(|d| d.join("examples/fur")) else {
+        return;
+    };
+    if !example.is_file() {
+        println!("skipping: {} is not built (`cargo test` builds the examples)", example.display());
+        return;
+    }
+    let png = std::env::temp_dir().join(format!("pomkit-bevy-fur-{}.png", std::process::id()));
+    let out = std::process::Command::new(&example)
+        .args(["--width", "64", "--height", "36", "--distance", "2", "-o"])
+        .arg(&png)
+        .env_remove("XDG_RUNTIME_DIR")
+        .env("NO_COLOR", "1")
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("the example runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let picture = image::open(&png).expect("the example wrote a PNG").to_rgb8();
+    std::fs::remove_file(&png).expect("remove the picture");
+    assert_eq!(picture.dimensions(), (64, 36));
+    let own: Vec<&str> = err
+        .lines()
+        .filter(|l| (l.contains("WARN") || l.contains("ERROR")) && !l.contains("software rendering"))
+        .collect();
+    assert!(own.is_empty(), "warnings or errors: {own:#?}");
+    // A bad option is one clear message and a failure, not a panic.
+    let out = std::process::Command::new(&example)
+        .args(["--distance", "0", "-o"])
+        .arg(&png)
+        .env_remove("XDG_RUNTIME_DIR")
+        .output()
+        .expect("the example runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--distance 0"), "{err}");
+    assert!(!err.contains("panicked") && !png.exists(), "{err}");
+}
