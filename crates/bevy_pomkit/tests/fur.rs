@@ -111,52 +111,65 @@ fn quantile(mut v: Vec<f32>, q: f32) -> f32 {
     v[((v.len() - 1) as f32 * q) as usize]
 }
 
+/// Over the pixels where both renderers traced the ball or the lawn, with the LOD fade off in
+/// both: the hit UV (in texels of the 512-texel maps, reduced to one tile), the hit depth and
+/// the sun's depth self-shadow, Bevy's debug outputs against pomkit-cpu's AOVs. Steep parallax
+/// quantises the hit to its 32 planes, and the two renderers take the ray into the tangent
+/// frame each its own way (Bevy from the UV derivatives, pomkit-cpu from per-vertex UV scales),
+/// so a pixel may land one plane apart: the medians are tight, the tails bounded.
 #[test]
 fn hit_uv_depth_and_depth_shadow_agree_with_pomkit_cpu() {
     let _gpu = GPU.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let scene = traced_scene();
     let cpu = cpu_render(&scene, (W, H));
     let aovs = cpu.aovs.as_ref().expect("AOVs");
-    let (hit, _) = bevy_render(&scene, (W, H), &FurOptions { debug: PomkitDebug::HitUv, ..default() }, |_, _| {});
+    let (hit, rays) = bevy_render(&scene, (W, H), &FurOptions { debug: PomkitDebug::HitUv, ..default() }, |_, _| {});
     let (shadow, _) = bevy_render(&scene, (W, H), &FurOptions { debug: PomkitDebug::Shadow, ..default() }, |_, _| {});
     let size = 512.0;
-    let (mut uv_err, mut depth_err, mut vis_err) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut cpu_vis, mut bevy_vis) = (0.0, 0.0);
+    // Pixels where pomkit-cpu drew a surface (its UV AOV is 0 on the background), off the
+    // frame's edge, split by the surface: the ball's sphere met by the ray, or not (the lawn).
+    let (mut ball, mut lawn) = (Vec::new(), Vec::new());
     for k in 0..(W * H) as usize {
-        // Pixels where pomkit-cpu drew a surface (its UV AOV is 0 on the background).
         let (x, y) = (k as u32 % W, k as u32 / W);
         if aovs.uv[k] == pomkit_core::glam::Vec2::ZERO || x == 0 || y == 0 || x + 1 == W || y + 1 == H {
             continue;
         }
-        let got = hit.pixels[k];
-        let du = wrapped(got[0], aovs.uv[k].x);
-        let dv = wrapped(got[1], aovs.uv[k].y);
-        uv_err.push((du * du + dv * dv).sqrt() * size);
-        depth_err.push((got[2] - aovs.depth[k]).abs());
-        let v = shadow.pixels[k][0];
-        vis_err.push((v - aovs.shadow[k]).abs());
-        cpu_vis += aovs.shadow[k];
-        bevy_vis += v;
+        if ball_hit(rays[k]).is_some() { ball.push(k) } else { lawn.push(k) }
     }
-    let n = uv_err.len();
-    assert!(n > (W * H / 2) as usize, "pomkit-cpu covers too little of the frame: {n} pixels");
-    let uv_far = uv_err.iter().filter(|&&e| e > 2.0).count() as f32 / n as f32;
-    let (uv_median, depth_median, vis_median) =
-        (quantile(uv_err.clone(), 0.5), quantile(depth_err.clone(), 0.5), quantile(vis_err.clone(), 0.5));
-    let vis_far = vis_err.iter().filter(|&&e| e > 0.1).count() as f32 / n as f32;
-    eprintln!(
-        "{n} pixels: hit UV median {uv_median:.3} texels, {:.1}% over 2 texels; depth median {depth_median:.4}; \
-         visibility median {vis_median:.4}, {:.1}% off by over 0.1; mean visibility pomkit-cpu {:.3}, Bevy {:.3}",
-        uv_far * 100.0,
-        vis_far * 100.0,
-        cpu_vis / n as f32,
-        bevy_vis / n as f32,
-    );
-    assert!(uv_median < 0.5, "hit UV median error {uv_median} texels");
-    assert!(uv_far < 0.1, "{:.1}% of pixels hit over 2 texels from pomkit-cpu's hit", uv_far * 100.0);
-    assert!(depth_median < 0.02, "hit depth median error {depth_median}");
-    assert!(vis_median < 0.02, "depth self-shadow median error {vis_median}");
-    assert!(vis_far < 0.1, "{:.1}% of pixels' self-shadow off by over 0.1", vis_far * 100.0);
+    for (name, pixels) in [("ball", &ball), ("lawn", &lawn)] {
+        let (mut uv_err, mut depth_err, mut vis_err) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut cpu_vis, mut bevy_vis) = (0.0, 0.0);
+        for &k in pixels {
+            let got = hit.pixels[k];
+            let (du, dv) = (wrapped(got[0], aovs.uv[k].x), wrapped(got[1], aovs.uv[k].y));
+            uv_err.push((du * du + dv * dv).sqrt() * size);
+            depth_err.push((got[2] - aovs.depth[k]).abs());
+            let v = shadow.pixels[k][0];
+            vis_err.push((v - aovs.shadow[k]).abs());
+            cpu_vis += aovs.shadow[k];
+            bevy_vis += v;
+        }
+        let n = pixels.len();
+        let share = |e: &[f32], over: f32| e.iter().filter(|&&e| e > over).count() as f32 / n as f32;
+        let (uv_far, vis_far) = (share(&uv_err, 2.0), share(&vis_err, 0.1));
+        let (uv_median, depth_median, vis_median) =
+            (quantile(uv_err.clone(), 0.5), quantile(depth_err.clone(), 0.5), quantile(vis_err.clone(), 0.5));
+        eprintln!(
+            "{name}: {n} pixels: hit UV median {uv_median:.3} texels, {:.1}% over 2 texels; depth median \
+             {depth_median:.4}; visibility median {vis_median:.4}, {:.1}% off by over 0.1; mean visibility \
+             pomkit-cpu {:.3}, Bevy {:.3}",
+            uv_far * 100.0,
+            vis_far * 100.0,
+            cpu_vis / n as f32,
+            bevy_vis / n as f32,
+        );
+        assert!(n > 1500, "{name}: too few pixels ({n})");
+        assert!(uv_median < 0.5, "{name}: hit UV median error {uv_median} texels");
+        assert!(uv_far < 0.05, "{name}: {:.1}% of pixels hit over 2 texels from pomkit-cpu's hit", uv_far * 100.0);
+        assert!(depth_median < 0.005, "{name}: hit depth median error {depth_median}");
+        assert!(vis_median < 0.005, "{name}: depth self-shadow median error {vis_median}");
+        assert!(vis_far < 0.05, "{name}: {:.1}% of pixels' self-shadow off by over 0.1", vis_far * 100.0);
+    }
 }
 
 /// Which surface each pixel shows: the scene with the ball's material plain red and the lawn's
