@@ -5,13 +5,14 @@
 //!
 //! ```text
 //! cargo run --release -p bevy_pomkit --example fur
-//! cargo run --release -p bevy_pomkit --example fur -- -o bevy_fur.png
+//! cargo run --release -p bevy_pomkit --example fur -- --supersample 2 -o bevy_fur.png
 //! ```
 //!
 //! In the window the ball turns slowly. Keys: F the far colour on / off, Up / Down the camera
 //! nearer / farther, Space stop / start the ball. The title shows the settings and the frame
 //! time. With `-o FILE` one frame is written to a PNG without a window (`--width`,
-//! `--height`, `--distance` to pull the camera back, `--no-far-color`).
+//! `--height`, `--supersample`); both take `--distance` to pull the camera back,
+//! `--no-far-color`, `--no-shadow-maps` and `--debug hit-uv|fetches|shadow`.
 
 #[path = "support/fur.rs"]
 mod fur;
