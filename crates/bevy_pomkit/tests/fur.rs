@@ -129,12 +129,12 @@ fn hit_uv_depth_and_depth_shadow_agree_with_pomkit_cpu() {
     // Pixels where pomkit-cpu drew a surface (its UV AOV is 0 on the background), off the
     // frame's edge, split by the surface: the ball's sphere met by the ray, or not (the lawn).
     let (mut ball, mut lawn) = (Vec::new(), Vec::new());
-    for k in 0..(W * H) as usize {
+    for (k, ray) in rays.iter().enumerate() {
         let (x, y) = (k as u32 % W, k as u32 / W);
         if aovs.uv[k] == pomkit_core::glam::Vec2::ZERO || x == 0 || y == 0 || x + 1 == W || y + 1 == H {
             continue;
         }
-        if ball_hit(rays[k]).is_some() { ball.push(k) } else { lawn.push(k) }
+        if ball_hit(*ray).is_some() { ball.push(k) } else { lawn.push(k) }
     }
     for (name, pixels) in [("ball", &ball), ("lawn", &lawn)] {
         let (mut uv_err, mut depth_err, mut vis_err) = (Vec::new(), Vec::new(), Vec::new());
