@@ -20,7 +20,7 @@
 }
 #import pomkit::library::{
     PomkitParams, PomkitHit, pomkit_tangent_frame, pomkit_uv_scale, pomkit_view_ray, pomkit_light_ray,
-    pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_shadow,
+    pomkit_mip_level, pomkit_lod_weight, pomkit_trace, pomkit_receiver, pomkit_shadow,
     pomkit_hit_position, pomkit_pixel_depth, pomkit_safe_normalize, POMKIT_FLAT, POMKIT_NORMAL,
     POMKIT_SHADOW_NONE, pomkit_to_tangent, pomkit_view_curvature, pomkit_trace_curved,
 }
@@ -63,6 +63,8 @@ struct PomkitMaterial {
     pad0: u32,
     pad1: u32,
     pad2: u32,
+    // The colour seen from afar, linear RGBA (POMKIT_FAR_COLOR).
+    far_color: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> pomkit: PomkitMaterial;
@@ -243,6 +245,12 @@ fn trace_fragment(in: VertexOutput, curvature: vec3<f32>) -> Traced {
         var hit = pomkit_trace(TECHNIQUE, pomkit_heights, pomkit_pyramid, pomkit_sampler, p, uv, ray, s.lod);
         s.ray_depth = hit.depth;
 #endif
+        // Steep parallax stops up to one layer below the surface: the receiver of shading, the
+        // depth self-shadow and the depth output is lifted onto it, as in pomkit's renderers,
+        // and the point moves up the view ray by as much.
+        let traced = hit.depth;
+        hit = pomkit_receiver(TECHNIQUE, pomkit_heights, pomkit_sampler, hit, s.lod);
+        s.ray_depth -= traced - hit.depth;
         s.fetches = hit.fetches;
 #ifdef POMKIT_LOD_FADE
         // The LOD band shades once, at the hit moved toward the entry point by the fade weight
@@ -351,7 +359,18 @@ fn standard_input(in: VertexOutput, is_front: bool, s: Traced) -> pbr_types::Pbr
 #endif
 #endif
 #ifdef POMKIT_TEX_BASE_COLOR
-    p.material.base_color *= textureSampleGrad(pbr_bindings::base_color_texture, pbr_bindings::base_color_sampler, uv, ddx, ddy);
+    var texel = textureSampleGrad(pbr_bindings::base_color_texture, pbr_bindings::base_color_sampler, uv, ddx, ddy);
+#else
+    var texel = vec4<f32>(1.0);
+#endif
+#ifdef POMKIT_FAR_COLOR
+    // The LOD fade fades to the colour seen from afar instead of the texture's coarse mips.
+    if s.ready {
+        texel = mix(pomkit.far_color, texel, s.weight);
+    }
+#endif
+    p.material.base_color *= texel;
+#ifdef POMKIT_TEX_BASE_COLOR
 #ifdef ALPHA_TO_COVERAGE
     if (flags & pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_RESERVED_BITS) == pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_ALPHA_TO_COVERAGE {
         // Sharpened alpha edges, as the standard material has them.
@@ -404,6 +423,11 @@ fn standard_input(in: VertexOutput, is_front: bool, s: Traced) -> pbr_types::Pbr
 #ifdef POMKIT_NORMALS
     if s.ready {
         p.N = surface_normal(s);
+#ifdef POMKIT_FAR_COLOR
+        // Seen from afar, the strands' tips make a surface along the polygon: its normal fades
+        // in with the far colour (the height map's normals, which have no mips, would alias).
+        p.N = pomkit_safe_normalize(mix(s.n, p.N, s.weight), s.n);
+#endif
     }
 #endif
     return p;

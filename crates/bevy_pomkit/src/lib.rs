@@ -34,7 +34,7 @@
 //!   applied to each light's direct contribution only (forward rendering; Bevy's deferred
 //!   lighting pass shades without them);
 //! - the LOD fade: the full technique up to a mip level of the height map, faded out over the
-//!   next;
+//!   next, on request to a colour seen from afar (fur's tips, [`Pomkit::far_color`]);
 //! - the standard material's textures sampled at the hit with the entry UV's gradients;
 //! - every option a pipeline specialisation (shader defs), so what is off costs nothing;
 //! - pixel depth offset, in the main pass, the depth prepass and the deferred G-buffer, and on
@@ -585,6 +585,15 @@ fn build_height_maps(
         if let Err(e) = m.extension.params() {
             let whose = m.extension.name.clone().unwrap_or_else(|| format!("material {id}"));
             maps.report(format!("bevy_pomkit: {whose}: {e}: drawing the plain StandardMaterial"));
+        }
+        if let Some(c) = m.extension.far_color
+            && !material::finite_color(c)
+        {
+            let whose = m.extension.name.clone().unwrap_or_else(|| format!("material {id}"));
+            maps.report(format!(
+                "bevy_pomkit: {whose}: far_color {:?} (linear RGBA) is not a finite colour: fading to the entry point's texture",
+                c.to_linear().to_f32_array()
+            ));
         }
     }
 }

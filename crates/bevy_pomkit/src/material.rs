@@ -103,6 +103,18 @@ pub struct Pomkit {
     /// different features and pick a far too coarse mip, in thin streaks at the feet of steep
     /// features. Kept for comparison.
     pub entry_gradients: bool,
+    /// The colour the surface shows from afar, for the LOD fade to fade to (needs a finite
+    /// `lod_threshold`). `None` (the default) fades to the untraced surface: the base colour
+    /// texture at the entry point, whose coarse mips average every depth of the relief
+    /// together. For fur and grass (McGuire and McGuire 2005, docs/REFERENCES.md) that average
+    /// takes in the dark roots and the skin or soil, which a distant furry ball does not show:
+    /// one sees the strands' tips. With a colour (the strands' tips' mean albedo, say) the base
+    /// colour texture's sample is replaced by it over the LOD band, in proportion to the fade,
+    /// and beyond it entirely; it is still multiplied by `base_color` (and vertex colours), as
+    /// the texture is. The depth self-shadow fades out with the technique either way. A
+    /// pipeline specialisation: unset, the shader has none of it. A colour that is not finite
+    /// is reported once in the log and ignored.
+    pub far_color: Option<Color>,
     /// Debug output instead of the shaded colour.
     pub debug: PomkitDebug,
     /// Bumpy outlines on curved meshes (default off): the view ray is bent under the curved
@@ -157,6 +169,7 @@ impl Pomkit {
             shadow_pixel_depth: false,
             normals: true,
             entry_gradients: true,
+            far_color: None,
             debug: PomkitDebug::Off,
             silhouette: false,
             height_build: crate::HeightBuild::Cpu,
@@ -205,6 +218,14 @@ impl Pomkit {
         self
     }
 
+    /// The same with the LOD fade fading to `color`, the colour the surface shows from afar
+    /// (see [`Pomkit::far_color`]).
+    #[must_use]
+    pub fn with_far_color(mut self, color: impl Into<Color>) -> Self {
+        self.far_color = Some(color.into());
+        self
+    }
+
     /// The checked parameter block the shader library reads.
     ///
     /// # Errors
@@ -247,6 +268,8 @@ pub struct PomkitUniform {
     pub pad1: u32,
     /// Padding.
     pub pad2: u32,
+    /// [`Pomkit::far_color`], linear RGBA (read only where the pipeline has `POMKIT_FAR_COLOR`).
+    pub far_color: Vec4,
 }
 
 impl AsBindGroupShaderType<PomkitUniform> for Pomkit {
@@ -264,6 +287,9 @@ impl AsBindGroupShaderType<PomkitUniform> for Pomkit {
         }
         if params.is_ok() && present(&self.heights) && present(&self.pyramid) && present(&self.normal_texture) {
             out.flags |= FLAG_READY;
+        }
+        if let Some(c) = self.far_color.filter(|c| finite_color(*c)) {
+            out.far_color = c.to_linear().to_vec4();
         }
         out
     }
@@ -327,6 +353,8 @@ pub struct PomkitKey {
     pub entry_gradients: bool,
     /// [`Pomkit::silhouette`].
     pub silhouette: bool,
+    /// [`Pomkit::far_color`] is set and the LOD fade has a band.
+    pub far_color: bool,
 }
 
 impl From<&Pomkit> for PomkitKey {
@@ -334,20 +362,28 @@ impl From<&Pomkit> for PomkitKey {
         // A material whose parameters are refused draws plain: trace nothing.
         let (technique, shadow) =
             if m.params().is_ok() { (m.technique, m.shadow.mode) } else { (Technique::Flat, ShadowMode::None) };
+        let lod_fade = m.lod_threshold.is_finite() && m.lod_threshold < MAX_LOD_THRESHOLD;
         Self {
             pixel_depth_offset: m.pixel_depth_offset,
             shadow_pixel_depth: m.shadow_pixel_depth,
             technique: technique_index(technique) as u8,
             shadow: shadow_index(shadow) as u8,
             normals: m.normals,
-            lod_fade: m.lod_threshold.is_finite() && m.lod_threshold < MAX_LOD_THRESHOLD,
+            lod_fade,
             debug: m.debug.index() as u8,
             textures: m.base_textures,
             point_lights: m.point_lights,
             entry_gradients: m.entry_gradients,
             silhouette: m.silhouette,
+            far_color: lod_fade && m.far_color.is_some_and(finite_color),
         }
     }
+}
+
+/// Whether every component of `c` (linear RGBA) is finite: a far colour that is not is
+/// reported and ignored.
+pub(crate) fn finite_color(c: Color) -> bool {
+    c.to_linear().to_f32_array().iter().all(|v| v.is_finite())
 }
 
 /// A LOD threshold at or above this mip level never fades (no height map has that many levels).
@@ -376,6 +412,7 @@ impl PomkitKey {
         };
         flag(self.normals, "POMKIT_NORMALS");
         flag(self.lod_fade, "POMKIT_LOD_FADE");
+        flag(self.lod_fade && self.far_color, "POMKIT_FAR_COLOR");
         flag(self.point_lights && self.shadow != 0, "POMKIT_POINT_LIGHTS");
         flag(!self.entry_gradients, "POMKIT_HIT_UV_DERIVATIVES");
         flag(pixel_depth, "POMKIT_PIXEL_DEPTH");
@@ -555,5 +592,31 @@ fn add_prepass_fragment(
 fn shader_def_name(d: &ShaderDefVal) -> String {
     match d {
         ShaderDefVal::Bool(n, _) | ShaderDefVal::Int(n, _) | ShaderDefVal::UInt(n, _) => n.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn has_far_color(m: &Pomkit) -> bool {
+        PomkitKey::from(m).shader_defs(&[], false).iter().any(|d| shader_def_name(d) == "POMKIT_FAR_COLOR")
+    }
+
+    #[test]
+    fn the_far_colour_is_in_the_shader_only_where_set_and_the_lod_fade_has_a_band() {
+        let plain = Pomkit::new(Handle::<Image>::default());
+        assert!(!has_far_color(&plain));
+        let far = plain.clone().with_far_color(Color::srgb(0.8, 0.6, 0.4));
+        assert!(has_far_color(&far));
+        let never_fades = Pomkit { lod_threshold: f32::MAX, ..far.clone() };
+        assert!(!has_far_color(&never_fades));
+        // A colour that is not finite is ignored (and reported by the plugin).
+        assert!(!has_far_color(&plain.clone().with_far_color(Color::linear_rgb(f32::NAN, 0.5, 0.5))));
+        // The uniform carries the colour in linear RGBA.
+        let want = Color::srgb(0.8, 0.6, 0.4).to_linear();
+        let uniform: PomkitUniform = far.as_bind_group_shader_type(&RenderAssets::<GpuImage>::default());
+        let got = uniform.far_color;
+        assert!((got - Vec4::new(want.red, want.green, want.blue, 1.0)).abs().max_element() < 1e-6);
     }
 }
