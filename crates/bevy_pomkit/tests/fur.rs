@@ -8,6 +8,8 @@
 //!
 //! All tests share one lock: each builds a Bevy app with its own GPU device.
 
+#[path = "support/examples.rs"]
+mod examples;
 #[path = "../examples/support/fur.rs"]
 mod fur;
 #[path = "../examples/support/headless.rs"]
@@ -390,40 +392,14 @@ fn a_far_colour_that_is_not_finite_is_reported_and_ignored() {
 #[test]
 fn the_fur_example_writes_its_picture_without_errors_or_warnings() {
     let _gpu = GPU.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    let exe = std::env::current_exe().expect("test binary");
-    let Some(example) = exe.parent().and_then(|deps| deps.parent()).map(|d| d.join("examples/fur")) else {
+    let Some(picture) = examples::picture_of("fur", &["--width", "64", "--height", "36", "--distance", "2"]) else {
         return;
     };
-    if !example.is_file() {
-        println!("skipping: {} is not built (`cargo test` builds the examples)", example.display());
-        return;
-    }
-    let png = std::env::temp_dir().join(format!("pomkit-bevy-fur-{}.png", std::process::id()));
-    let out = std::process::Command::new(&example)
-        .args(["--width", "64", "--height", "36", "--distance", "2", "-o"])
-        .arg(&png)
-        .env_remove("XDG_RUNTIME_DIR")
-        .env("NO_COLOR", "1")
-        .stdin(std::process::Stdio::null())
-        .output()
-        .expect("the example runs");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
-    let picture = image::open(&png).expect("the example wrote a PNG").to_rgb8();
-    std::fs::remove_file(&png).expect("remove the picture");
     assert_eq!(picture.dimensions(), (64, 36));
-    let own: Vec<&str> = err
-        .lines()
-        .filter(|l| (l.contains("WARN") || l.contains("ERROR")) && !l.contains("software rendering"))
-        .collect();
-    assert!(own.is_empty(), "warnings or errors: {own:#?}");
     // A bad option is one clear message and a failure, not a panic.
-    let out = std::process::Command::new(&example)
-        .args(["--distance", "0", "-o"])
-        .arg(&png)
-        .env_remove("XDG_RUNTIME_DIR")
-        .output()
-        .expect("the example runs");
+    let example = examples::built_example("fur").expect("built");
+    let png = std::env::temp_dir().join(format!("pomkit-bevy-fur-bad-{}.png", std::process::id()));
+    let out = examples::run(&example, &["--distance", "0"], &png);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("--distance 0"), "{err}");
     assert!(!err.contains("panicked") && !png.exists(), "{err}");

@@ -4,6 +4,8 @@
 //!
 //! All tests share one lock: each builds a Bevy app with its own GPU device.
 
+#[path = "support/examples.rs"]
+mod examples;
 #[path = "../examples/support/headless.rs"]
 mod headless;
 #[path = "../examples/support/probe.rs"]
@@ -938,32 +940,9 @@ fn textures_at_the_hit_have_no_streaks_at_the_feet_of_steep_features() {
 #[test]
 fn the_headless_example_exits_without_errors_or_warnings() {
     let _gpu = GPU.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    let exe = std::env::current_exe().expect("test binary");
-    let Some(example) = exe.parent().and_then(|deps| deps.parent()).map(|d| d.join("examples/headless")) else {
+    let Some(picture) = examples::picture_of("headless", &["--width", "64", "--height", "36", "--technique", "pom"])
+    else {
         return;
     };
-    if !example.is_file() {
-        println!("skipping: {} is not built (`cargo test` builds the examples)", example.display());
-        return;
-    }
-    let png = std::env::temp_dir().join(format!("pomkit-bevy-example-{}.png", std::process::id()));
-    let out = std::process::Command::new(&example)
-        .args(["--width", "64", "--height", "36", "--technique", "pom", "-o"])
-        .arg(&png)
-        .env_remove("XDG_RUNTIME_DIR")
-        .env("NO_COLOR", "1")
-        .stdin(std::process::Stdio::null())
-        .output()
-        .expect("the example runs");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
-    assert!(png.is_file(), "the example wrote no picture: {err}");
-    std::fs::remove_file(&png).expect("remove the picture");
-    assert!(!err.contains("XDG_RUNTIME_DIR"), "Mesa's runtime-directory error: {err}");
-    assert!(!err.contains("Failed to send readback result"), "the readback warning at exit: {err}");
-    let own: Vec<&str> = err
-        .lines()
-        .filter(|l| (l.contains("WARN") || l.contains("ERROR")) && !l.contains("software rendering"))
-        .collect();
-    assert!(own.is_empty(), "warnings or errors: {own:#?}");
+    assert_eq!(picture.dimensions(), (64, 36));
 }
