@@ -241,7 +241,7 @@ fn apply_setting(r: &mut Request, key: &str, json: &Json) -> Result<Option<Strin
         "name" | "albedo" | "normal" | "base_color" | "specular" | "shininess" => {
             return Err("the glTF material's own textures and values are drawn, by Bevy's PBR".to_owned());
         }
-        "normal_y_down" | "normalize" | "cone_map" | "silhouette" => {
+        "normal_y_down" | "normalize" | "cone_map" => {
             return Err("not supported by bevy_pomkit".to_owned());
         }
         _ => {}
@@ -275,6 +275,7 @@ fn apply_setting(r: &mut Request, key: &str, json: &Json) -> Result<Option<Strin
         }
         ("depth_map", Value::Bool(b)) => e.map_kind = if b { MapKind::Depth } else { MapKind::Height },
         ("pixel_depth_offset", Value::Bool(b)) => e.pixel_depth_offset = b,
+        ("silhouette", Value::Bool(b)) => e.silhouette = b,
         ("depth_scale", Value::Float(x)) => r.depth_scale = Some(x as f32),
         ("perspective_bias", Value::Float(x)) => e.trace.perspective_bias = x as f32,
         ("softness", Value::Float(x)) => e.shadow.softness = x as f32,
@@ -605,6 +606,11 @@ mod tests {
             assert!(w.iter().any(|m| m.contains(&format!("pomkit.{key}")) && m.ends_with("ignored")), "{key}: {w:?}");
         }
         assert_eq!(r.extension.trace.binary_steps, pomkit_core::trace::TraceParams::default().binary_steps);
+        assert!(!r.extension.silhouette, "silhouettes are off unless asked for");
+        // Silhouettes, as in scene files; a key bevy_pomkit cannot honour still warns.
+        let (r, w) = read(DISP, Some(r#"{"pomkit": {"silhouette": true, "cone_map": "c.exr"}}"#));
+        assert!(r.expect("read").expect("pomkit").extension.silhouette);
+        assert!(w.len() == 1 && w[0].contains("pomkit.cone_map"), "{w:?}");
     }
 
     #[test]
