@@ -624,7 +624,9 @@ pub(crate) fn check_meshes(
             (Mesh::ATTRIBUTE_TANGENT, "TANGENT (call Mesh::generate_tangents or export tangents)"),
         ]
         .into_iter()
-        .filter(|(a, _)| !mesh.contains_attribute(a.id))
+        // A mesh whose vertex data lives in the render world only (RenderAssetUsages::RENDER_WORLD)
+        // cannot be looked at here: the shader still draws it plain if an attribute is missing.
+        .filter(|(a, _)| matches!(mesh.try_contains_attribute(a.id), Ok(false)))
         .map(|(_, n)| n)
         .collect();
         if !missing.is_empty() {

@@ -446,6 +446,36 @@ fn bad_inputs_draw_the_plain_material_and_say_why() {
     }
 }
 
+/// A mesh whose vertex data Bevy keeps in the render world only (`RenderAssetUsages::RENDER_WORLD`,
+/// as static meshes often are) has no attributes left in the main world once drawn: a second
+/// entity drawn with it later is checked without a panic and drawn like the first.
+#[test]
+fn a_mesh_kept_in_the_render_world_only_is_drawn_again_without_a_panic() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let s = Setup::new(generate(Pattern::Bricks, 32, 32), Technique::Pom);
+    let mut app = Headless::new(W, H);
+    let mut mesh = quad(Tangents::Imported);
+    mesh.asset_usage = RenderAssetUsages::RENDER_WORLD;
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(mesh);
+    let material = pomkit_material(&mut app, &s, StandardMaterial::default());
+    spawn_camera(&mut app, s.camera, false);
+    app.world().spawn((Mesh3d(mesh.clone()), MeshMaterial3d(material.clone()), Transform::from_xyz(-5.0, 0.0, 0.0)));
+    app.frame(TIMEOUT).expect("frame");
+    app.frame(TIMEOUT).expect("frame");
+    let extracted = app.world().resource::<Assets<Mesh>>().get(&mesh).expect("the mesh asset");
+    assert!(
+        extracted.try_contains_attribute(Mesh::ATTRIBUTE_POSITION).is_err(),
+        "the mesh data stayed in the main world"
+    );
+    // The second entity, in view: drawn (the debug view of the hit UV), with no report.
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+    let frame = app.frame(TIMEOUT).expect("frame");
+    let covered = frame.pixels.iter().filter(|p| p[0] > 0.0 || p[1] > 0.0).count();
+    assert!(covered > (W * H / 4) as usize, "the quad is not drawn: {covered} pixels");
+    let reports = app.world().resource::<HeightMaps>().reports();
+    assert!(reports.is_empty(), "{reports:?}");
+}
+
 #[test]
 fn a_height_map_that_changes_is_rebuilt() {
     let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
