@@ -243,6 +243,8 @@ struct Built {
 #[derive(Resource, Default)]
 pub struct HeightMaps {
     built: HashMap<AssetId<PomkitMaterial>, Built>,
+    /// The materials whose height map was refused (reported, drawn plain) at their `built` inputs.
+    refused: HashSet<AssetId<PomkitMaterial>>,
     cache: HashMap<Built, Textures>,
     reported: HashSet<String>,
     derived: HashSet<AssetId<Image>>,
@@ -477,7 +479,11 @@ fn build_height_maps(
             parallax: e.technique == Technique::Iterative,
             build: gpu_height::effective(e.height_build),
         };
-        let stale = maps.built.get(&id) != Some(&want) || changed.contains(&want.source);
+        // A material whose textures are gone while the plugin thinks them built was replaced
+        // by a copy without them (`Assets::insert` of the same id, an asset reloaded): built
+        // again. One the plugin refused stays plain until an input changes.
+        let lost = !e.is_ready() && !maps.refused.contains(&id);
+        let stale = maps.built.get(&id) != Some(&want) || changed.contains(&want.source) || lost;
         if stale {
             let whose = e.name.as_ref().map(|n| format!("{n}: ")).unwrap_or_default();
             work.push((id, want, whose));
@@ -508,6 +514,7 @@ fn build_height_maps(
                                 err.to_string().trim_end()
                             ));
                             maps.built.insert(id, want);
+                            maps.refused.insert(id);
                         }
                         continue;
                     };
@@ -543,8 +550,10 @@ fn build_height_maps(
                 ext.heights = Some(t.heights);
                 ext.pyramid = Some(t.pyramid);
                 ext.normal_texture = Some(t.normals);
+                maps.refused.remove(&id);
             }
             Err(message) => {
+                maps.refused.insert(id);
                 maps.report(message);
                 ext.heights = None;
                 ext.pyramid = None;
@@ -572,6 +581,7 @@ fn build_height_maps(
     }
     // Forget removed materials, and textures no material uses any more.
     maps.built.retain(|id, _| materials.contains(*id));
+    maps.refused.retain(|id| materials.contains(*id));
     let used: HashSet<Built> = maps.built.values().cloned().collect();
     maps.cache.retain(|k, _| used.contains(k));
     maps.gpu.retain(|k, _| used.contains(k));

@@ -476,6 +476,38 @@ fn a_mesh_kept_in_the_render_world_only_is_drawn_again_without_a_panic() {
     assert!(reports.is_empty(), "{reports:?}");
 }
 
+/// A material asset replaced by a copy without the textures the plugin built (`Assets::insert`
+/// with the same id, as an app or an asset reload does) is built again and traced, not left
+/// plain because its inputs did not change.
+#[test]
+fn a_material_replaced_by_a_copy_is_traced_again() {
+    let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let s = Setup::new(generate(Pattern::Bricks, 32, 32), Technique::Pom);
+    let mut app = Headless::new(W, H);
+    let mesh = app.world().resource_mut::<Assets<Mesh>>().add(quad(Tangents::Imported));
+    let material = pomkit_material(&mut app, &s, StandardMaterial::default());
+    spawn_camera(&mut app, s.camera, false);
+    app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
+    let traced = app.frame(TIMEOUT).expect("frame");
+    let copy = {
+        let materials = app.world().resource::<Assets<PomkitMaterial>>();
+        let m = materials.get(&material).expect("the material");
+        assert!(m.extension.is_ready(), "not built");
+        let mut extension = Pomkit::new(m.extension.height_map.clone());
+        let e = &m.extension;
+        (extension.technique, extension.depth_scale, extension.map_kind) = (e.technique, e.depth_scale, e.map_kind);
+        (extension.debug, extension.lod_threshold) = (e.debug, e.lod_threshold);
+        PomkitMaterial { base: m.base.clone(), extension }
+    };
+    assert!(!copy.extension.is_ready());
+    app.world().resource_mut::<Assets<PomkitMaterial>>().insert(&material, copy).expect("replaced");
+    let again = app.frame(TIMEOUT).expect("frame");
+    // The debug view's blue is the hit's depth: the mortar lies deep where the quad is traced.
+    let deep = traced.pixels.iter().filter(|p| p[2] > 0.05).count();
+    assert!(deep > 200, "the first frame is not traced: {deep} deep pixels");
+    assert_eq!(again.pixels, traced.pixels, "the replaced material is not traced as before");
+}
+
 #[test]
 fn a_height_map_that_changes_is_rebuilt() {
     let _gpu = GPU.lock().unwrap_or_else(|e| e.into_inner());
