@@ -361,12 +361,7 @@ fn a_broken_displacement_texture_draws_the_plain_material_with_one_report() {
     };
     app.world().entity_mut(entity).remove::<MeshMaterial3d<PomkitMaterial>>().insert(MeshMaterial3d(std_handle));
     let plain = app.frame(TIMEOUT).expect("plain frame");
-    let worst = broken
-        .pixels
-        .iter()
-        .zip(&plain.pixels)
-        .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max))
-        .fold(0.0, f32::max);
+    let worst = broken.max_difference(&plain);
     let lit = plain.pixels.iter().filter(|p| p[0] + p[1] + p[2] > 0.05).count();
     assert!(lit > (W * H / 4) as usize, "the plane should be lit: {lit} pixels");
     assert!(worst < 2e-3, "not the plain material's look (difference {worst})");

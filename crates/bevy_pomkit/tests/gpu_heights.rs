@@ -203,12 +203,7 @@ fn gpu_built_levels_equal_pomkit_core() {
     app.frame(TIMEOUT).expect("frame");
     let reports = app.world().resource::<HeightMaps>().reports();
     assert!(reports.is_empty(), "reports: {reports:?}");
-    let [heights, pyramid, normals_id] = app
-        .world()
-        .resource::<Assets<PomkitMaterial>>()
-        .get(&material)
-        .and_then(|m| m.extension.height_textures())
-        .expect("the GPU textures are made");
+    let [heights, pyramid, normals_id] = gpu_textures(&mut app, &material);
 
     let f16 = f16_field(&field);
     let (w, h) = (field.width(), field.height());
@@ -408,12 +403,7 @@ fn an_srgb_colour_image_imports_its_stored_luma_as_the_cpu_reads_it() {
     app.frame(TIMEOUT).expect("frame");
     let reports = app.world().resource::<HeightMaps>().reports();
     assert!(reports.is_empty(), "reports: {reports:?}");
-    let [heights, ..] = app
-        .world()
-        .resource::<Assets<PomkitMaterial>>()
-        .get(&material)
-        .and_then(|m| m.extension.height_textures())
-        .expect("the GPU textures are made");
+    let [heights, ..] = gpu_textures(&mut app, &material);
     let gpu = channel(&read_mips(&mut app, heights)[0].2, 4, 0);
     let worst = compare("mip 0 depth from the luma", &gpu, cpu.depths(), |v| f16_half_step(v) + 1e-6);
     eprintln!("{w}x{h} Rgba8UnormSrgb, luma: worst difference from the CPU's depths {worst:.2e}");
@@ -557,12 +547,7 @@ fn a_texture_written_by_a_compute_pass_is_built_in_the_same_frame() {
     app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
     spawn_camera(&mut app);
     app.frame(TIMEOUT).expect("frame");
-    let [heights, ..] = app
-        .world()
-        .resource::<Assets<PomkitMaterial>>()
-        .get(&material)
-        .and_then(|m| m.extension.height_textures())
-        .expect("the GPU textures are made");
+    let [heights, ..] = gpu_textures(&mut app, &material);
     // Each frame a new stamp: the heights built in that frame hold that frame's texels.
     for stamp in 2..5 {
         app.world().insert_resource(Stamp(stamp));
@@ -604,13 +589,17 @@ fn an_edited_image_of_a_new_size_is_built_at_that_size() {
     app.frame(TIMEOUT).expect("frame");
     let reports = app.world().resource::<HeightMaps>().reports();
     assert!(reports.is_empty(), "an edit to a new size is no error: {reports:?}");
-    let [heights, ..] = app
-        .world()
-        .resource::<Assets<PomkitMaterial>>()
-        .get(&material)
-        .and_then(|m| m.extension.height_textures())
-        .expect("the GPU textures are made");
+    let [heights, ..] = gpu_textures(&mut app, &material);
     let mip0 = read_mips(&mut app, heights).swap_remove(0);
     assert_eq!((mip0.0, mip0.1), (20, 27), "the textures' size");
     compare("mip 0 depth of the new image", &channel(&mip0.2, 4, 0), f16_field(&second).depths(), |_| 0.0);
+}
+
+/// The heights, pyramid and normals textures the plugin made for `material`.
+fn gpu_textures(app: &mut Headless, material: &Handle<PomkitMaterial>) -> [AssetId<Image>; 3] {
+    app.world()
+        .resource::<Assets<PomkitMaterial>>()
+        .get(material)
+        .and_then(|m| m.extension.height_textures())
+        .expect("the GPU textures are made")
 }

@@ -428,12 +428,7 @@ fn bad_inputs_draw_the_plain_material_and_say_why() {
         app.world().spawn((Mesh3d(mesh), MeshMaterial3d(material)));
         lit_scene(&mut app);
         let frame = app.frame(TIMEOUT).expect("frame");
-        let worst = frame
-            .pixels
-            .iter()
-            .zip(&reference.pixels)
-            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max))
-            .fold(0.0, f32::max);
+        let worst = frame.max_difference(&reference);
         let reports = app.world().resource::<HeightMaps>().reports();
         eprintln!("{case}: worst difference from the plain material {worst}; reports {reports:?}");
         assert!(worst < 2e-3, "{case}: not the plain material's look (difference {worst})");

@@ -302,12 +302,7 @@ fn meshes_without_curvature_are_reported_and_drawn_plain() {
             n[100] = [f32::NAN; 3];
         }
         let (frame, reports) = render_bevy(&s, mesh, uv_textured, Extra::None);
-        let worst = frame
-            .pixels
-            .iter()
-            .zip(&reference.pixels)
-            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max))
-            .fold(0.0, f32::max);
+        let worst = frame.max_difference(&reference);
         eprintln!("{case}: worst difference from the plain material {worst}; reports {reports:?}");
         assert!(worst < 2e-3, "{case}: not the plain material's picture (difference {worst})");
         let expect = if case == "no normals" { "no NORMAL" } else { "no silhouettes" };

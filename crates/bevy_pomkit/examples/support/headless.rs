@@ -77,6 +77,17 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// The largest difference of any colour channel between this frame and `other`, pixel by
+    /// pixel (alpha aside).
+    #[must_use]
+    pub fn max_difference(&self, other: &Frame) -> f32 {
+        self.pixels
+            .iter()
+            .zip(&other.pixels)
+            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max))
+            .fold(0.0, f32::max)
+    }
+
     /// The pixel at column `x`, row `y` (0 at the top).
     #[must_use]
     pub fn at(&self, x: u32, y: u32) -> [f32; 4] {
