@@ -1,8 +1,8 @@
 //! Bad or extreme input: a scale that overflows,
 //! geometry f32 cannot draw, a glTF accessor past its buffer, unusable normal maps, flags a
 //! built-in height cannot honour, Mesa's runtime-directory noise, causes printed twice, NUL
-//! bytes in paths, and library jargon where the problem should be named; plus the inputs that
-//! now work: single-channel OpenEXR and float TIFF height maps, `--normalize` on the extremes of
+//! bytes in paths, and library jargon where the problem should be named; plus inputs at the
+//! edge of what is read: single-channel OpenEXR and float TIFF height maps, `--normalize` on the extremes of
 //! f32, and a watertight rasterizer.
 
 mod support;

@@ -130,8 +130,8 @@ fn entries_refuse_garbage_and_load_valid_files() {
 }
 
 /// The crashes the fuzzer found (docs/FUZZING.md, "What was found") are refused with their
-/// cause, not only without a panic: before the fixes, each was a panic in tobj or gltf, which
-/// `load_mesh` turned into "the parser failed on malformed data".
+/// cause, not only without a panic: without pomkit-io's checks, each is a panic in tobj or gltf,
+/// which `load_mesh` turns into "the parser failed on malformed data".
 #[test]
 fn reproducers_are_refused_with_their_cause() {
     let cases = [

@@ -1,8 +1,9 @@
 //! Runs one of bevy_pomkit's examples as a user does, without a window, and checks what every
 //! example owes its user: it exits successfully, writes its picture, and logs no error or
 //! warning of its own making (Bevy's warning that lavapipe renders in software is the
-//! machine's). `XDG_RUNTIME_DIR` is unset, as in a container or on CI, where Mesa used to log
-//! an error for it.
+//! machine's). `XDG_RUNTIME_DIR` is unset, as in a container or on CI, where Mesa logs an error
+//! for it unless the example gives the process a runtime directory
+//! (`pomkit_gpu::util::ensure_runtime_dir`).
 
 use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
