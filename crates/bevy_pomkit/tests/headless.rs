@@ -991,8 +991,7 @@ fn textures_at_the_hit_have_no_streaks_at_the_feet_of_steep_features() {
 /// The headless example, run where `XDG_RUNTIME_DIR` is unset (a container, CI), writes its
 /// picture and logs no error and no warning of its own making: not Mesa's runtime-directory
 /// line (without `pomkit_gpu::util::ensure_runtime_dir`), and not Bevy's "Failed to send
-/// readback result", which an app dropped with a frame copy still in flight logged at every
-/// exit. (Bevy's warning that lavapipe renders in software is the machine's, and stays.)
+/// readback result", which an app dropped with a frame copy still in flight logs at exit. (Bevy's warning that lavapipe renders in software is the machine's, and stays.)
 /// `cargo test` builds the examples beside the tests; a run of this file alone may not have it.
 #[test]
 fn the_headless_example_exits_without_errors_or_warnings() {

@@ -166,8 +166,8 @@ fn summary(err: &str) -> Summary {
     found[0]
 }
 
-/// The summary's counts are these, and its line has the spec's form: `baked B, skipped S,
-/// failed F of T files`, then (optionally) the time.
+/// The summary's counts are these, and its line has the README's form ("Baking a library"):
+/// `baked B, skipped S, failed F of T files`, then (optionally) the time.
 fn summary_is(err: &str, baked: u64, skipped: u64, failed: u64, total: u64) {
     assert_eq!(summary(err), Summary { baked, skipped, failed, total }, "summary in {err:?}");
     let form = format!("baked {baked}, skipped {skipped}, failed {failed} of {total} files");
@@ -308,8 +308,9 @@ fn recursive_mirrors_subfolders_under_out() {
         reason(&err, b);
     }
     assert!(!failed_lines(&err).iter().any(|l| l.contains("dir.png")), "dir.png is a folder to walk: {err:?}");
-    // The spec names FIFOs as failed files explicitly only without --recursive; either way the
-    // FIFO is never opened (the run returned) and never baked.
+    // With --recursive a FIFO may be reported as a failed file or left out (the README and
+    // docs/LIMITS.md require neither); either way it is never opened (the run returned) and
+    // never baked.
     let fifo_failed = failed_lines(&err).iter().any(|l| l.contains("pipe.png: "));
     let expect_failed = (bad.len() - 2 + usize::from(fifo_failed)) as u64;
     assert_eq!(failed_lines(&err).len() as u64, expect_failed, "{err:?}");
@@ -452,7 +453,7 @@ fn explicit_inputs_and_globs_bake_each_file_once() {
     same_as(&d.join("out/s_normal.png"), &single(d, "normal", "other/s.png", &[], "png"), "s.png");
 
     // `**` reaches the subfolder; the file it reaches and the same file given by name: once.
-    // (Where under OUT a `**` match goes is not in the spec: only the count is checked.)
+    // (Where under OUT a `**` match goes is not documented: only the count is checked.)
     let err = ok(&["bake", "normal", "maps/**/t.png", "maps/deep/t.png", "-o", "out2"], d);
     summary_is(&err, 1, 0, 0, 1);
     assert_eq!(files(&d.join("out2")).len(), 1, "{:?}", files(&d.join("out2")));

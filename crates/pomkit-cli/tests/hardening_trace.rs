@@ -87,7 +87,8 @@ fn exact_with_huge_uvs_and_wrapping_edges_finishes_with_the_first_tiles_hit() {
 
 #[test]
 fn huge_depth_scales_are_refused_naming_the_flag_and_the_limit() {
-    // compare --depth-scale 1e14 hung (even with --techniques pom, since exact is the truth).
+    // Unbounded, compare --depth-scale 1e14 would hang (even with --techniques pom, since exact
+    // is the truth).
     let dir = tempfile::tempdir().expect("temp dir");
     std::fs::write(dir.path().join("r.csv"), "u,v,dx,dy,dz\n0.3,0.4,0.5,0.2,-0.6\n").expect("write rays");
     for scale in ["1e14", "1e20", "1e30", "1e4", "16.01", "inf"] {
@@ -239,7 +240,8 @@ fn scene_files_with_out_of_range_depth_scale_or_bias_are_refused_naming_the_key(
 
 #[test]
 fn cpu_renderer_draws_uvs_of_1e15_with_exact() {
-    // A mesh whose UVs are about 1e15 hung the CPU renderer with `exact` (and exact shadows).
+    // A mesh whose UVs are about 1e15 must not hang the CPU renderer with `exact` (and exact
+    // shadows).
     let mut plane = Mesh::plane(Vec2::splat(2.0), 1);
     for uv in &mut plane.uvs {
         *uv += Vec2::new(1e15, -1e15);

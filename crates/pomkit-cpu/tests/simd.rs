@@ -1,7 +1,7 @@
 //! The packets of eight fragments against the single fragments: every technique, every shadow
 //! mode, the LOD fade, the pixel depth offset and point lights give the same frame, bit for bit,
 //! on the SIMD level this machine has, on the scalar fallback (`POMKIT_SIMD=scalar`) and one
-//! fragment at a time ([`Simd8::unpacked`], the scalar code the packets were written from).
+//! fragment at a time ([`Simd8::unpacked`], the scalar code the packets mirror).
 
 use pomkit_core::demo::demo_scene_sized;
 use pomkit_core::glam::Vec3;
