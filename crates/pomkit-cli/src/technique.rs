@@ -30,9 +30,9 @@ pub struct TechniqueArgs {
     pub depth_scale: f32,
     #[arg(long, default_value_t = params::MIN_SAMPLES.default.u32(), help = params::MIN_SAMPLES.help(), value_name = "N")]
     pub min_samples: u32,
-    #[arg(long, default_value_t = params::MAX_SAMPLES_PARAM.default.u32(), help = params::MAX_SAMPLES_PARAM.help(), value_name = "N")]
+    #[arg(long, default_value_t = params::MAX_SAMPLES.default.u32(), help = params::MAX_SAMPLES.help(), value_name = "N")]
     pub max_samples: u32,
-    #[arg(long, default_value_t = params::SAMPLES_PARAM.default.u32(), help = params::SAMPLES_PARAM.help(), value_name = "N")]
+    #[arg(long, default_value_t = params::SAMPLES.default.u32(), help = params::SAMPLES.help(), value_name = "N")]
     pub samples: u32,
     #[arg(long, default_value_t = params::ITERATIONS.default.u32(), help = params::ITERATIONS.help(), value_name = "K")]
     pub iterations: u32,

@@ -2,7 +2,8 @@
 //!
 //! Height fields and their sampling, mip chains and the maximum-height pyramid, tangent frames
 //! for triangle meshes, normal and parallax map baking, and procedural height maps. No file I/O
-//! lives here: `pomkit-io` turns files into these types.
+//! lives here: `pomkit-io` turns files into these types. The one contact with the environment
+//! is [`memory`]'s budget probe (`POMKIT_MEMORY_LIMIT` and, on Linux, `/proc`).
 //!
 //! Conventions are those of ARCHITECTURE.md: tangent space x = T (along +u), y = B (up the
 //! image, along -v), z = N; depth `d` in `[0, 1]` with 0 at the polygon's surface; UV `(0, 0)` at
@@ -41,6 +42,7 @@ pub mod heightfield;
 pub mod integrate;
 pub mod memory;
 pub mod mesh;
+mod modes;
 pub mod params;
 pub mod procedural;
 pub mod pyramid;
@@ -48,6 +50,7 @@ pub mod render;
 pub mod scene;
 pub mod shadow;
 pub mod silhouette;
+mod table;
 pub mod tangent;
 pub mod trace;
 

@@ -181,14 +181,6 @@ pub fn check_more(what: impl FnOnce() -> String, already: u64, more: u64, advice
     }
 }
 
-/// The budget in bytes, or `u64::MAX` when there is none (for limits passed to other libraries).
-///
-/// # Errors
-/// As [`available_bytes`].
-pub fn budget_or_unlimited() -> Result<u64, MemoryError> {
-    Ok(available_bytes()?.map_or(u64::MAX, |b| b.bytes))
-}
-
 /// `MemAvailable` from the text of `/proc/meminfo`, in bytes.
 fn mem_available(meminfo: &str) -> Option<u64> {
     let line = meminfo.lines().find(|l| l.starts_with("MemAvailable:"))?;

@@ -480,7 +480,7 @@ pub struct Material {
 /// The material defaults that are not trace or shadow parameters, from the parameter table
 /// (evaluated when building).
 mod defaults {
-    use crate::params as p;
+    use crate::table as p;
     pub const BASE_COLOR: [f32; 3] = p::BASE_COLOR.default.color();
     pub const DEPTH_SCALE: f32 = p::DEPTH_SCALE.default.f32();
     pub const LOD_THRESHOLD: f32 = p::LOD_THRESHOLD.default.f32();

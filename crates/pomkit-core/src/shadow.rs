@@ -13,63 +13,9 @@
 use glam::{DVec3, Vec2, Vec3};
 
 use crate::heightfield::EdgeMode;
+pub use crate::modes::ShadowMode;
+pub use crate::trace::shadow_march::{Shadow, ShadowMarch};
 use crate::trace::{MIN_COS, Surface, Technique, TraceParams, adaptive_samples, exact_first_hit, unit_direction};
-
-/// How self-shadowing is computed.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum ShadowMode {
-    /// No self-shadowing: visibility 1 wherever N.L > 0.
-    #[default]
-    None,
-    /// Any sample of the height profile above the light ray shadows the point (Brawley 2004,
-    /// McGuire 2005). Between `min_samples` and `max_samples` fetches; aliases into stairs on
-    /// thin blockers.
-    Hard,
-    /// A horizon-angle penumbra estimate after Tatarchuk 2006: each sample's blocker elevation
-    /// is weighed by its distance from the receiver and the darkest sample wins. Same fetches as `Hard`; soft,
-    /// stable edges; no contact hardening for very thin features.
-    Soft,
-    /// The exact tracer along the light ray: shadowed if the ray meets the bilinear surface.
-    /// Exact, hard-edged; O(log size) fetches typically.
-    Exact,
-    /// No shadow ray: visibility `1 - depth` at the displaced point, from 1 on the polygon's
-    /// surface (the tips of fur or grass) to 0 at the deepest point (the skin or soil). Zero
-    /// fetches. McGuire 2005 ("Fur and Grass") approximates the self-shadowing of short straight
-    /// fur and grass "as simply increasing with depth", after Lengyel, Praun, Finkelstein and
-    /// Hoppe 2001, whose fur shells darken linearly from the tips down to the skin
-    /// (docs/REFERENCES.md). Meant for dense, thin relief, where every point is shadowed by
-    /// strands in every direction in proportion to how deep it lies; on sparse relief (bricks)
-    /// it darkens what the light actually reaches.
-    Depth,
-}
-
-impl ShadowMode {
-    /// Every mode.
-    pub const ALL: [ShadowMode; 5] =
-        [ShadowMode::None, ShadowMode::Hard, ShadowMode::Soft, ShadowMode::Exact, ShadowMode::Depth];
-
-    /// The name used by the command line and scene files.
-    #[must_use]
-    pub const fn name(self) -> &'static str {
-        match self {
-            ShadowMode::None => "none",
-            ShadowMode::Hard => "hard",
-            ShadowMode::Soft => "soft",
-            ShadowMode::Exact => "exact",
-            ShadowMode::Depth => "depth",
-        }
-    }
-}
-
-impl std::str::FromStr for ShadowMode {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        ShadowMode::ALL.into_iter().find(|m| m.name().eq_ignore_ascii_case(s.trim())).ok_or_else(|| {
-            let names: Vec<&str> = ShadowMode::ALL.iter().map(|m| m.name()).collect();
-            format!("unknown shadow mode '{s}': expected one of {}", names.join(", "))
-        })
-    }
-}
 
 impl ShadowMode {
     /// The most fetches one [`shadow`] call may make in this mode with `params` on `surface`:
@@ -99,22 +45,13 @@ pub struct ShadowParams {
 
 impl ShadowParams {
     /// The defaults, from the parameter table ([`crate::params`]; evaluated when building).
-    pub const DEFAULT: Self = Self { mode: ShadowMode::None, softness: crate::params::SOFTNESS.default.f32() };
+    pub const DEFAULT: Self = Self { mode: ShadowMode::None, softness: crate::table::SOFTNESS.default.f32() };
 }
 
 impl Default for ShadowParams {
     fn default() -> Self {
         Self::DEFAULT
     }
-}
-
-/// Visibility of the light from a displaced point, and the fetches spent finding it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Shadow {
-    /// 1 lit, 0 fully shadowed.
-    pub visibility: f32,
-    /// Height fetches made.
-    pub fetches: u32,
 }
 
 /// Light visibility at the displaced point `(uv, depth)` toward `light` (tangent-space
@@ -152,92 +89,6 @@ pub enum ShadowStart {
     Done(Shadow),
     /// A `hard` or `soft` shadow ray to march.
     March(ShadowMarch),
-}
-
-/// A `hard` or `soft` shadow ray, ready to march: samples `i = 1 .. n - 1` at the climbed depths
-/// `t_i = depth * i / n`, at UV `uv + s * t_i`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ShadowMarch {
-    /// The receiver's UV, in its own tile where the edges wrap.
-    pub uv: Vec2,
-    /// The receiver's depth, in `(0, 1]`, lifted onto the surface at mip `lod`.
-    pub depth: f32,
-    /// UV offset per unit of depth climbed toward the light.
-    pub s: Vec2,
-    /// Samples plus one (the adaptive count of the light's angle).
-    pub n: u32,
-    /// `soft` (a penumbra estimate) rather than `hard`.
-    pub soft: bool,
-    /// The light's tangent of the angle from the normal (`soft`).
-    pub tan_theta: f32,
-    /// The light's elevation above the tangent plane, radians (`soft`).
-    pub light_elevation: f32,
-    /// The light's angular radius, radians (`soft`).
-    pub rho: f32,
-    /// The mip level sampled.
-    pub lod: f32,
-}
-
-impl ShadowMarch {
-    /// The climbed depth of sample `i`.
-    #[inline]
-    #[must_use]
-    pub fn climbed(&self, i: u32) -> f32 {
-        self.depth * i as f32 / self.n as f32
-    }
-
-    /// Marches the ray on `surface`, one sample at a time. The fetches count the receiver's
-    /// lift made by [`shadow_start`].
-    #[must_use]
-    pub fn run(&self, surface: &Surface) -> Shadow {
-        let mut slope = f32::NEG_INFINITY;
-        let mut fetches = 1;
-        for i in 1..self.n {
-            let t = self.climbed(i);
-            let d = surface.depth(self.uv + self.s * t, self.lod);
-            fetches += 1;
-            if self.soft {
-                slope = slope.max(self.slope(d, t));
-            } else if self.blocks(d, t) {
-                return Shadow { visibility: 0.0, fetches };
-            }
-        }
-        let visibility = if self.soft { self.soft_visibility(slope) } else { 1.0 };
-        Shadow { visibility, fetches }
-    }
-
-    /// `hard`: whether a profile sample of depth `d` at climbed depth `t` rises above the ray.
-    #[inline]
-    #[must_use]
-    pub fn blocks(&self, d: f32, t: f32) -> bool {
-        d < self.depth - t - 1e-5
-    }
-
-    /// `soft`: the rise of a profile sample of depth `d` above the receiver per unit climbed at
-    /// climbed depth `t` (its elevation seen from the receiver is `atan2(slope, tan_theta)`).
-    #[inline]
-    #[must_use]
-    pub fn slope(&self, d: f32, t: f32) -> f32 {
-        (self.depth - d) / t
-    }
-
-    /// `soft`: the visibility under the steepest sample's `slope` ([`ShadowMarch::slope`];
-    /// `-inf` for no sample).
-    ///
-    /// Each sample's elevation as seen from the receiver, `atan2(depth - d, t * tan_theta)`,
-    /// is set against the light's: nearer blockers subtend more, so they darken more (Tatarchuk
-    /// 2006's distance weighting), and the darkest sample wins. The visibility
-    /// `clamp(0.5 - (elevation - light_elevation) / (2 rho), 0, 1)` falls as the elevation
-    /// rises, and the elevation rises with the slope `(depth - d) / t` (for `t > 0` and
-    /// `tan_theta >= 0`), so the darkest sample is the steepest: one arctangent per ray.
-    #[must_use]
-    pub fn soft_visibility(&self, slope: f32) -> f32 {
-        if slope == f32::NEG_INFINITY {
-            return 1.0;
-        }
-        let elevation = slope.atan2(self.tan_theta);
-        (0.5 - (elevation - self.light_elevation) / (2.0 * self.rho)).clamp(0.0, 1.0)
-    }
 }
 
 /// The checks of [`shadow`], and the exact shadow; the hard and soft marches are returned to

@@ -258,6 +258,11 @@ impl<'a> Search<'a> {
     /// footprint when its direction's signs along x and y are `quadrant` (the footprint swept
     /// along that quadrant; `None`: all of it), and, if `relaxed`, only where a ray from the top
     /// plane may leave the surface ([`Search::may_exit`]).
+    ///
+    /// The branch and bound: regions are popped from a stack, dropped when their lower bound
+    /// ([`Search::lower`]) cannot beat the best ratio found, kept with their bound when small
+    /// for their distance, and otherwise split ([`Search::split`]), the most promising child
+    /// searched first.
     pub(super) fn ratio_ahead(
         &self,
         i: u32,
@@ -271,160 +276,36 @@ impl<'a> Search<'a> {
             // Nothing is shallower than this footprint's top.
             return (self.cap as f32, None);
         }
-        let (cx0, cy0) = (f64::from(i), f64::from(j));
-        let (cx1, cy1) = (cx0 + 1.0, cy0 + 1.0);
-        // How far the stored top (f32) may lie below the surface over the footprint: the slope
-        // bound starts from the surface, which is at least `m - excess` everywhere on it.
-        let excess = (m - self.exact_top(i64::from(i), i64::from(j))).max(0.0);
-        let slopes = self.slopes.as_ref().expect("made with the search");
-        // Whether the rectangle [x0, x1] x [y0, y1] meets the footprint swept along the quadrant.
-        let ahead = |x0: f64, x1: f64, y0: f64, y1: f64| match quadrant {
-            None => true,
-            Some((sx, sy)) => {
-                (if sx > 0.0 { x1 >= cx0 } else { x0 <= cx1 }) && (if sy > 0.0 { y1 >= cy0 } else { y0 <= cy1 })
-            }
-        };
-        let dist = |r: &Region| {
-            let dx = (cx0 - r.x1).max(r.x0 - cx1).max(0.0);
-            let dy = (cy0 - r.y1).max(r.y0 - cy1).max(0.0);
-            (dx * dx + dy * dy).sqrt()
-        };
-        // The lower bound of region `r`, or infinity where it cannot matter; any value at or
-        // above `threshold` (which is all that is then needed of it) for a region that the
-        // distance bound alone already puts there.
-        let lower = |r: &Region, threshold: f64| {
-            if r.min_depth >= m - LEVEL || !ahead(r.x0, r.x1, r.y0, r.y1) {
-                return f64::INFINITY;
-            }
-            let fall = m - r.min_depth;
-            let dx = (cx0 - r.x1).max(r.x0 - cx1).max(0.0);
-            let dy = (cy0 - r.y1).max(r.y0 - cy1).max(0.0);
-            let reach = threshold * fall;
-            if dx * dx + dy * dy >= reach * reach {
-                return threshold;
-            }
-            if relaxed && matches!(r.kind, Kind::Patch(_)) && !self.may_exit(cx0, cy0, r) {
-                // Relaxed cones may hold surface where no ray from the top plane leaves it.
-                return f64::INFINITY;
-            }
-            let near = (dx * dx + dy * dy).sqrt();
-            let b = (near / fall).max(self.near_bound(i64::from(i), i64::from(j), m, r));
-            if b >= threshold || excess >= LEVEL {
-                return b;
-            }
-            // The slope bound ([`slope`]): over the box holding `r` and the part of the
-            // footprint nearest to it, the surface rises at most `g` per texel from the
-            // footprint's edge, so a point `t` away from it is at most `g t + excess` above the
-            // top; it counts only if that is over LEVEL, so `t >= (LEVEL - excess) / g`, and
-            // `t / (g t + excess)` grows with `t`.
-            let (bx0, bx1) = (r.x0.min(r.x0.clamp(cx0, cx1)), r.x1.max(r.x1.clamp(cx0, cx1)));
-            let (by0, by1) = (r.y0.min(r.y0.clamp(cy0, cy1)), r.y1.max(r.y1.clamp(cy0, cy1)));
-            match slopes.max_over(bx0, bx1, by0, by1) {
-                Some(g) if g > 0.0 => {
-                    let t = near.max((LEVEL - excess) / g);
-                    b.max(t / (g * t + excess))
-                }
-                Some(_) => f64::INFINITY,
-                None => b,
-            }
-        };
-        // The ratio a surface point at (x, y) allows.
-        let point_at = |x: f64, y: f64, d: f64| {
-            if !ahead(x, x, y, y) || d >= m - LEVEL {
-                return f64::INFINITY;
-            }
-            let dx = (cx0 - x).max(x - cx1).max(0.0);
-            let dy = (cy0 - y).max(y - cy1).max(0.0);
-            (dx * dx + dy * dy).sqrt() / (m - d)
-        };
-        let point = |x: f64, y: f64| point_at(x, y, self.surface(x, y));
-        // Nothing needs a ratio over the cap: start the search just above it.
-        let mut best = self.cap / (1.0 - SLACK);
-        let mut best_at = None;
+        let fp = self.footprint(i, j, m, quadrant, relaxed);
+        let mut best = Best::new(self.cap);
         if let Some((x, y)) = witness {
-            let r = point(x, y);
-            if r < best {
-                (best, best_at) = (r, Some((x, y)));
-            }
+            best.offer(fp.point_at(x, y, self.surface(x, y)), (x, y));
         }
         let far = if relaxed { FAR_RELAXED } else { FAR };
-        // Regions too small to split keep their lower bound.
-        let mut floor = f64::INFINITY;
         let top = self.pyramid.len() - 1;
         let mut stack: Vec<(f64, Region)> = self
             .tiles
             .iter()
             .map(|&(tx, ty)| self.node(top, 0, 0, tx, ty))
-            .map(|r| (lower(&r, f64::INFINITY), r))
+            .map(|r| (self.lower(&fp, &r, f64::INFINITY), r))
             .collect();
         let mut children: Vec<(f64, Region)> = Vec::with_capacity(4);
         while let Some((lb, r)) = stack.pop() {
-            if lb >= (best * (1.0 - SLACK)).min(floor) {
+            if lb >= best.threshold() {
                 continue;
             }
             // A region small for its distance: its bound is within a factor `1 + FAR` of the
             // least ratio of any of its points (which lie at most its diagonal further away).
             let diagonal = ((r.x1 - r.x0).powi(2) + (r.y1 - r.y0).powi(2)).sqrt();
-            if diagonal <= far * dist(&r) {
-                floor = floor.min(lb);
+            if diagonal <= far * fp.dist(&r) {
+                best.floor = best.floor.min(lb);
                 continue;
             }
             children.clear();
-            match r.kind {
-                Kind::Node { level: 0, .. } => {
-                    // The footprint's four quarters, each inside one patch.
-                    let (xm, ym) = (r.x0 + 0.5, r.y0 + 0.5);
-                    for (x0, x1) in [(r.x0, xm), (xm, r.x1)] {
-                        for (y0, y1) in [(r.y0, ym), (ym, r.y1)] {
-                            children.push((0.0, self.patch_rect(x0, x1, y0, y1)));
-                        }
-                    }
-                }
-                Kind::Node { level, x, y, tx, ty } => {
-                    let level = usize::from(level);
-                    let (cw, ch) = self.pyramid.level_size(level - 1);
-                    for (cx, cy) in [(2 * x, 2 * y), (2 * x + 1, 2 * y), (2 * x, 2 * y + 1), (2 * x + 1, 2 * y + 1)] {
-                        if cx < cw && cy < ch {
-                            children.push((0.0, self.node(level - 1, cx, cy, tx, ty)));
-                        }
-                    }
-                }
-                Kind::Patch(d) => {
-                    for (k, (x, y)) in [(r.x0, r.y0), (r.x1, r.y0), (r.x0, r.y1), (r.x1, r.y1)].into_iter().enumerate()
-                    {
-                        let p = point_at(x, y, d[k]);
-                        if p < best {
-                            (best, best_at) = (p, Some((x, y)));
-                        }
-                    }
-                    // Level with the footprint along one axis, the ratio over the rectangle is
-                    // least at a corner: there the distance to the footprint is the offset along
-                    // the other axis, the surface is linear along each axis inside a patch, and
-                    // `offset / (m - depth)` is monotone along each. The corners just seen are
-                    // its exact least value: nothing to split.
-                    let band = (r.y0 >= cy0 && r.y1 <= cy1) || (r.x0 >= cx0 && r.x1 <= cx1);
-                    if band {
-                        continue;
-                    }
-                    if r.x1 - r.x0 <= MIN_REGION && r.y1 - r.y0 <= MIN_REGION {
-                        floor = floor.min(lb);
-                        continue;
-                    }
-                    let (xm, ym) = (0.5 * (r.x0 + r.x1), 0.5 * (r.y0 + r.y1));
-                    let xs: &[(f64, f64)] =
-                        if r.x1 - r.x0 > MIN_REGION { &[(r.x0, xm), (xm, r.x1)] } else { &[(r.x0, r.x1)] };
-                    let ys: &[(f64, f64)] =
-                        if r.y1 - r.y0 > MIN_REGION { &[(r.y0, ym), (ym, r.y1)] } else { &[(r.y0, r.y1)] };
-                    for &(x0, x1) in xs {
-                        for &(y0, y1) in ys {
-                            children.push((0.0, self.patch_rect(x0, x1, y0, y1)));
-                        }
-                    }
-                }
-            }
-            let threshold = (best * (1.0 - SLACK)).min(floor);
+            self.split(&fp, &r, lb, &mut best, &mut children);
+            let threshold = best.threshold();
             for c in &mut children {
-                c.0 = lower(&c.1, threshold);
+                c.0 = self.lower(&fp, &c.1, threshold);
             }
             children.retain(|c| c.0 < threshold);
             // The most promising child is searched first: pushed last.
@@ -437,7 +318,197 @@ impl<'a> Search<'a> {
             }
             stack.extend(children.iter());
         }
-        let ratio = (best * (1.0 - SLACK)).min(floor).clamp(0.0, self.cap);
-        (ratio as f32, best_at)
+        let ratio = best.threshold().clamp(0.0, self.cap);
+        (ratio as f32, best.at)
+    }
+
+    /// What the search of footprint `(i, j)`, whose top is `m`, needs to know of it.
+    fn footprint(&self, i: u32, j: u32, m: f64, quadrant: Option<(f64, f64)>, relaxed: bool) -> Footprint {
+        let (cx0, cy0) = (f64::from(i), f64::from(j));
+        Footprint {
+            i: i64::from(i),
+            j: i64::from(j),
+            m,
+            cx0,
+            cy0,
+            cx1: cx0 + 1.0,
+            cy1: cy0 + 1.0,
+            // How far the stored top (f32) may lie below the surface over the footprint: the
+            // slope bound starts from the surface, which is at least `m - excess` everywhere on it.
+            excess: (m - self.exact_top(i64::from(i), i64::from(j))).max(0.0),
+            quadrant,
+            relaxed,
+        }
+    }
+
+    /// The lower bound of region `r` for footprint `fp`, or infinity where it cannot matter;
+    /// any value at or above `threshold` (which is all that is then needed of it) for a region
+    /// that the distance bound alone already puts there.
+    fn lower(&self, fp: &Footprint, r: &Region, threshold: f64) -> f64 {
+        let (m, excess) = (fp.m, fp.excess);
+        let (cx0, cx1, cy0, cy1) = (fp.cx0, fp.cx1, fp.cy0, fp.cy1);
+        if r.min_depth >= m - LEVEL || !fp.ahead(r.x0, r.x1, r.y0, r.y1) {
+            return f64::INFINITY;
+        }
+        let fall = m - r.min_depth;
+        let dx = (cx0 - r.x1).max(r.x0 - cx1).max(0.0);
+        let dy = (cy0 - r.y1).max(r.y0 - cy1).max(0.0);
+        let reach = threshold * fall;
+        if dx * dx + dy * dy >= reach * reach {
+            return threshold;
+        }
+        if fp.relaxed && matches!(r.kind, Kind::Patch(_)) && !self.may_exit(cx0, cy0, r) {
+            // Relaxed cones may hold surface where no ray from the top plane leaves it.
+            return f64::INFINITY;
+        }
+        let near = (dx * dx + dy * dy).sqrt();
+        let b = (near / fall).max(self.near_bound(fp.i, fp.j, m, r));
+        if b >= threshold || excess >= LEVEL {
+            return b;
+        }
+        // The slope bound ([`slope`]): over the box holding `r` and the part of the
+        // footprint nearest to it, the surface rises at most `g` per texel from the
+        // footprint's edge, so a point `t` away from it is at most `g t + excess` above the
+        // top; it counts only if that is over LEVEL, so `t >= (LEVEL - excess) / g`, and
+        // `t / (g t + excess)` grows with `t`.
+        let (bx0, bx1) = (r.x0.min(r.x0.clamp(cx0, cx1)), r.x1.max(r.x1.clamp(cx0, cx1)));
+        let (by0, by1) = (r.y0.min(r.y0.clamp(cy0, cy1)), r.y1.max(r.y1.clamp(cy0, cy1)));
+        let slopes = self.slopes.as_ref().expect("made with the search");
+        match slopes.max_over(bx0, bx1, by0, by1) {
+            Some(g) if g > 0.0 => {
+                let t = near.max((LEVEL - excess) / g);
+                b.max(t / (g * t + excess))
+            }
+            Some(_) => f64::INFINITY,
+            None => b,
+        }
+    }
+
+    /// Splits region `r` (lower bound `lb`) into `children`: a pyramid cell into its children,
+    /// a level-0 cell into the quarters that lie in one patch each, a rectangle inside a patch
+    /// into halves along each axis after its corners are offered to `best`. A rectangle that
+    /// needs no split (level with the footprint, or too small) gives none.
+    fn split(&self, fp: &Footprint, r: &Region, lb: f64, best: &mut Best, children: &mut Vec<(f64, Region)>) {
+        match r.kind {
+            Kind::Node { level: 0, .. } => {
+                // The footprint's four quarters, each inside one patch.
+                let (xm, ym) = (r.x0 + 0.5, r.y0 + 0.5);
+                for (x0, x1) in [(r.x0, xm), (xm, r.x1)] {
+                    for (y0, y1) in [(r.y0, ym), (ym, r.y1)] {
+                        children.push((0.0, self.patch_rect(x0, x1, y0, y1)));
+                    }
+                }
+            }
+            Kind::Node { level, x, y, tx, ty } => {
+                let level = usize::from(level);
+                let (cw, ch) = self.pyramid.level_size(level - 1);
+                for (cx, cy) in [(2 * x, 2 * y), (2 * x + 1, 2 * y), (2 * x, 2 * y + 1), (2 * x + 1, 2 * y + 1)] {
+                    if cx < cw && cy < ch {
+                        children.push((0.0, self.node(level - 1, cx, cy, tx, ty)));
+                    }
+                }
+            }
+            Kind::Patch(d) => {
+                for (k, (x, y)) in [(r.x0, r.y0), (r.x1, r.y0), (r.x0, r.y1), (r.x1, r.y1)].into_iter().enumerate() {
+                    best.offer(fp.point_at(x, y, d[k]), (x, y));
+                }
+                // Level with the footprint along one axis, the ratio over the rectangle is
+                // least at a corner: there the distance to the footprint is the offset along
+                // the other axis, the surface is linear along each axis inside a patch, and
+                // `offset / (m - depth)` is monotone along each. The corners just seen are
+                // its exact least value: nothing to split.
+                let band = (r.y0 >= fp.cy0 && r.y1 <= fp.cy1) || (r.x0 >= fp.cx0 && r.x1 <= fp.cx1);
+                if band {
+                    return;
+                }
+                if r.x1 - r.x0 <= MIN_REGION && r.y1 - r.y0 <= MIN_REGION {
+                    best.floor = best.floor.min(lb);
+                    return;
+                }
+                let (xm, ym) = (0.5 * (r.x0 + r.x1), 0.5 * (r.y0 + r.y1));
+                let xs: &[(f64, f64)] =
+                    if r.x1 - r.x0 > MIN_REGION { &[(r.x0, xm), (xm, r.x1)] } else { &[(r.x0, r.x1)] };
+                let ys: &[(f64, f64)] =
+                    if r.y1 - r.y0 > MIN_REGION { &[(r.y0, ym), (ym, r.y1)] } else { &[(r.y0, r.y1)] };
+                for &(x0, x1) in xs {
+                    for &(y0, y1) in ys {
+                        children.push((0.0, self.patch_rect(x0, x1, y0, y1)));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The footprint `C = [cx0, cx1] x [cy0, cy1]` a cone is searched for, with its top `m`.
+struct Footprint {
+    i: i64,
+    j: i64,
+    m: f64,
+    cx0: f64,
+    cy0: f64,
+    cx1: f64,
+    cy1: f64,
+    /// How far the stored (f32) top may lie below the surface over the footprint.
+    excess: f64,
+    /// The signs of the ray directions searched for (`None`: every direction).
+    quadrant: Option<(f64, f64)>,
+    relaxed: bool,
+}
+
+impl Footprint {
+    /// Whether the rectangle `[x0, x1] x [y0, y1]` meets the footprint swept along the quadrant.
+    fn ahead(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> bool {
+        match self.quadrant {
+            None => true,
+            Some((sx, sy)) => {
+                (if sx > 0.0 { x1 >= self.cx0 } else { x0 <= self.cx1 })
+                    && (if sy > 0.0 { y1 >= self.cy0 } else { y0 <= self.cy1 })
+            }
+        }
+    }
+
+    /// The distance from region `r` to the footprint.
+    fn dist(&self, r: &Region) -> f64 {
+        let dx = (self.cx0 - r.x1).max(r.x0 - self.cx1).max(0.0);
+        let dy = (self.cy0 - r.y1).max(r.y0 - self.cy1).max(0.0);
+        (dx * dx + dy * dy).sqrt()
+    }
+
+    /// The ratio a surface point at `(x, y)` of depth `d` allows.
+    fn point_at(&self, x: f64, y: f64, d: f64) -> f64 {
+        if !self.ahead(x, x, y, y) || d >= self.m - LEVEL {
+            return f64::INFINITY;
+        }
+        let dx = (self.cx0 - x).max(x - self.cx1).max(0.0);
+        let dy = (self.cy0 - y).max(y - self.cy1).max(0.0);
+        (dx * dx + dy * dy).sqrt() / (self.m - d)
+    }
+}
+
+/// The search's state: the best (least) ratio a surface point gives and that point, and the
+/// least lower bound of the regions kept unsplit.
+struct Best {
+    ratio: f64,
+    at: Option<(f64, f64)>,
+    floor: f64,
+}
+
+impl Best {
+    /// Nothing needs a ratio over the cap: the search starts just above it.
+    fn new(cap: f64) -> Self {
+        Self { ratio: cap / (1.0 - SLACK), at: None, floor: f64::INFINITY }
+    }
+
+    /// Takes the point `at` if its ratio `r` is better.
+    fn offer(&mut self, r: f64, at: (f64, f64)) {
+        if r < self.ratio {
+            (self.ratio, self.at) = (r, Some(at));
+        }
+    }
+
+    /// The ratio found so far: the best point's with the slack, or a kept region's bound.
+    fn threshold(&self) -> f64 {
+        (self.ratio * (1.0 - SLACK)).min(self.floor)
     }
 }

@@ -343,31 +343,17 @@ impl DisplacedBlocks<'_> {
 
     /// The stride of block `[i0, j0, i1, j1]` of triangle `t` (split into `n` parts) and of its
     /// sides (`LEFT`, `RIGHT`, `BOTTOM`, `TOP`): 1 everywhere without a view.
-    fn strides(&self, t: usize, [i0, j0, i1, j1]: [u32; 4], n: u32, face: Vec3, fine: &mut Vec<f32>) -> BlockPlan {
+    ///
+    /// In steps: which of the block and its sides may coarsen at all ([`coarsenable`]); a block
+    /// out of view; a block too shallow to show its relief ([`DisplacedBlocks::shallow_block`]);
+    /// otherwise the field sampled at the block's grid points ([`DisplacedBlocks::sample_grid`])
+    /// and the coarsest stride each side ([`side_stride`]) and the block ([`block_stride`]) can
+    /// take within the view's tolerance.
+    fn strides(&self, t: usize, block: [u32; 4], n: u32, face: Vec3, fine: &mut Vec<f32>) -> BlockPlan {
         let fine_block = BlockPlan { stride: 1, sides: [1; 4], bounds: None };
         let Some(view) = &self.view else { return fine_block };
-        let k = BLOCK_CELLS;
-        // A triangle of fewer than `4k + 1` parts has no block strictly inside (that needs
-        // `i0, j0 >= k` and `i0 + j0 + 2k < n`): all of its blocks stay fine, and so may all
-        // of its sides, which only this triangle's blocks share. (The sphere of the demo is
-        // such triangles, tens of thousands of blocks whose planning would sample every grid
-        // point for nothing but the sides.)
-        if n <= 4 * k {
-            return fine_block;
-        }
-        let whole = i1 == i0 + k && j1 == j0 + k;
-        // A side coarsens when it is whole, inside the triangle and not on its edges; a block
-        // when it is whole and strictly inside.
-        let side_ok = [
-            i0 > 0 && j1 == j0 + k && i0 + j1 <= n,
-            whole && i1 + j1 <= n,
-            j0 > 0 && i1 == i0 + k && i1 + j0 <= n,
-            whole && i1 + j1 <= n,
-        ];
-        let block_ok = whole && i0 > 0 && j0 > 0 && i1 + j1 < n;
-        if !block_ok && !side_ok.iter().any(|&ok| ok) {
-            return fine_block;
-        }
+        let Some((side_ok, block_ok)) = coarsenable(block, n) else { return fine_block };
+        let [i0, j0, i1, j1] = block;
         let (mesh, plan) = (self.mesh.as_ref(), &self.plan);
         // The corners, undisplaced.
         let corners = [(i0, j0), (i1, j0), (i0, j1), (i1, j1)];
@@ -391,50 +377,16 @@ impl DisplacedBlocks<'_> {
         // The largest of them, when all are known.
         let reach = reaches.iter().try_fold(0.0f32, |m, r| r.map(|r| m.max(r)));
         let tol = view.tolerance;
-        // A block whose relief is too shallow to see whole passes every test below at the
-        // coarsest stride: a grid point and the coarse surface over it (which interpolates
-        // other grid points) both lie within the depths of the texels under the block, so they
-        // differ by at most that range. Settled without sampling its grid (the pyramid's range
-        // holds every sample's; a margin covers the rounding of the interpolation).
-        if let (Some(ranges), true) = (self.ranges.as_ref(), block_ok) {
-            let corners = [(i0, j0), (i1, j0), (i0, j1), (i1, j1)].map(|(i, j)| uv_at(i, j));
-            let lo = corners.iter().fold(Vec2::INFINITY, |m, &c| m.min(c));
-            let hi = corners.iter().fold(Vec2::NEG_INFINITY, |m, &c| m.max(c));
-            if let (Some((d0, d1)), Some(r)) = (ranges.over(lo, hi), reach)
-                && (d1 - d0 + 1e-5) * r <= tol
-            {
-                let s = STRIDES[0];
-                let bounds = self.flat_bounds(t, &blended, (d0, d1), view);
-                return BlockPlan { stride: s, sides: [s; 4], bounds };
-            }
+        if block_ok && let Some(shallow) = self.shallow_block(t, block, &uv_at, reach, &blended, view) {
+            return shallow;
         }
-        // The field's depth at every grid point of the block inside the triangle (at the point's
-        // barycentric UV, in f32: a function of the point alone, as both blocks of a side need).
+        self.sample_grid(block, n, &uv_at, fine);
+        let k = BLOCK_CELLS;
         let width = (k + 1) as usize;
-        fine.clear();
-        fine.resize(width * width, 0.0);
-        for j in j0..=j1 {
-            for i in i0..=i1.min(n - j) {
-                fine[(j - j0) as usize * width + (i - i0) as usize] =
-                    self.field.sample_bilinear(uv_at(i, j), self.edges);
-            }
-        }
         let f = |a: u32, b: u32| fine[b as usize * width + a as usize];
-        // Along a side: its points `at(0..=k)` against the straight lines between every s-th.
         let side = |ends: [usize; 2], at: &dyn Fn(u32) -> f32| -> u32 {
             let (Some(r0), Some(r1)) = (reaches[ends[0]], reaches[ends[1]]) else { return 1 };
-            let r = r0.max(r1);
-            STRIDES
-                .into_iter()
-                .find(|&s| {
-                    (0..=k).all(|x| {
-                        let c = (x / s * s).min(k - s);
-                        let u = (x - c) as f32 / s as f32;
-                        let line = at(c) + (at(c + s) - at(c)) * u;
-                        (at(x) - line).abs() * r <= tol
-                    })
-                })
-                .unwrap_or(1)
+            side_stride(at, r0.max(r1), tol)
         };
         let mut sides = [1; 4];
         if side_ok[LEFT] {
@@ -456,31 +408,55 @@ impl DisplacedBlocks<'_> {
         let Some(r) = reach else {
             return BlockPlan { stride: 1, sides, bounds };
         };
-        // Over the block: every grid point against the coarse cell's triangle under it, split
-        // along the diagonal from (s, 0) to (0, s) as the cells are.
-        let stride = STRIDES
-            .into_iter()
-            .find(|&s| {
-                (0..=k).all(|b| {
-                    (0..=k).all(|a| {
-                        let (ca, cb) = ((a / s * s).min(k - s), (b / s * s).min(k - s));
-                        let (u, v) = ((a - ca) as f32 / s as f32, (b - cb) as f32 / s as f32);
-                        let (f00, f10, f01) = (f(ca, cb), f(ca + s, cb), f(ca, cb + s));
-                        let coarse = if u + v <= 1.0 {
-                            f00 + (f10 - f00) * u + (f01 - f00) * v
-                        } else {
-                            let f11 = f(ca + s, cb + s);
-                            f11 + (f01 - f11) * (1.0 - u) + (f10 - f11) * (1.0 - v)
-                        };
-                        (f(a, b) - coarse).abs() * r <= tol
-                    })
-                })
-            })
-            .unwrap_or(1);
+        let stride = block_stride(f, r, tol);
         // A side passes wherever its block does (its points and ends are the block's), up to
         // rounding: the block takes the coarsest stride all of its sides take too, so that a
         // side's stride, which its other block computes alike, is never finer than the block's.
         BlockPlan { stride: sides.into_iter().fold(stride, u32::min), sides, bounds }
+    }
+
+    /// The plan of an interior block whose relief is too shallow to see whole, `None` for
+    /// others. Such a block passes every test of [`DisplacedBlocks::strides`] at the coarsest
+    /// stride: a grid point and the coarse surface over it (which interpolates other grid
+    /// points) both lie within the depths of the texels under the block, so they differ by at
+    /// most that range. Settled without sampling its grid (the pyramid's range holds every
+    /// sample's; a margin covers the rounding of the interpolation).
+    fn shallow_block(
+        &self,
+        t: usize,
+        [i0, j0, i1, j1]: [u32; 4],
+        uv_at: &dyn Fn(u32, u32) -> Vec2,
+        reach: Option<f32>,
+        blended: &[Option<super::displace::Blended>; 4],
+        view: &DisplacementView,
+    ) -> Option<BlockPlan> {
+        let ranges = self.ranges.as_ref()?;
+        let corners = [(i0, j0), (i1, j0), (i0, j1), (i1, j1)].map(|(i, j)| uv_at(i, j));
+        let lo = corners.iter().fold(Vec2::INFINITY, |m, &c| m.min(c));
+        let hi = corners.iter().fold(Vec2::NEG_INFINITY, |m, &c| m.max(c));
+        if let (Some((d0, d1)), Some(r)) = (ranges.over(lo, hi), reach)
+            && (d1 - d0 + 1e-5) * r <= view.tolerance
+        {
+            let s = STRIDES[0];
+            let bounds = self.flat_bounds(t, blended, (d0, d1), view);
+            return Some(BlockPlan { stride: s, sides: [s; 4], bounds });
+        }
+        None
+    }
+
+    /// The field's depth at every grid point of block `[i0, j0, i1, j1]` inside the triangle
+    /// (at the point's barycentric UV, in f32: a function of the point alone, as both blocks of
+    /// a side need), into `fine`, `BLOCK_CELLS + 1` points a row.
+    fn sample_grid(&self, [i0, j0, i1, j1]: [u32; 4], n: u32, uv_at: &dyn Fn(u32, u32) -> Vec2, fine: &mut Vec<f32>) {
+        let width = (BLOCK_CELLS + 1) as usize;
+        fine.clear();
+        fine.resize(width * width, 0.0);
+        for j in j0..=j1 {
+            for i in i0..=i1.min(n - j) {
+                fine[(j - j0) as usize * width + (i - i0) as usize] =
+                    self.field.sample_bilinear(uv_at(i, j), self.edges);
+            }
+        }
     }
 
     /// Where on screen an interior block of a flat input triangle (one normal and one
@@ -715,6 +691,75 @@ fn coarse_lerps(n: u32, m: u32) -> Vec<Lerp> {
         }
     }
     out
+}
+
+/// Which sides of block `[i0, j0, i1, j1]` of a triangle split into `n` parts may coarsen, and
+/// whether the block may (`None`: none of them). A side coarsens when it is whole, inside the
+/// triangle and not on its edges; a block when it is whole and strictly inside.
+///
+/// A triangle of fewer than `4k + 1` parts (`k` = [`BLOCK_CELLS`]) has no block strictly inside
+/// (that needs `i0, j0 >= k` and `i0 + j0 + 2k < n`): all of its blocks stay fine, and so may
+/// all of its sides, which only this triangle's blocks share. (The sphere of the demo is such
+/// triangles, tens of thousands of blocks whose planning would sample every grid point for
+/// nothing but the sides.)
+fn coarsenable([i0, j0, i1, j1]: [u32; 4], n: u32) -> Option<([bool; 4], bool)> {
+    let k = BLOCK_CELLS;
+    if n <= 4 * k {
+        return None;
+    }
+    let whole = i1 == i0 + k && j1 == j0 + k;
+    let side_ok = [
+        i0 > 0 && j1 == j0 + k && i0 + j1 <= n,
+        whole && i1 + j1 <= n,
+        j0 > 0 && i1 == i0 + k && i1 + j0 <= n,
+        whole && i1 + j1 <= n,
+    ];
+    let block_ok = whole && i0 > 0 && j0 > 0 && i1 + j1 < n;
+    (block_ok || side_ok.iter().any(|&ok| ok)).then_some((side_ok, block_ok))
+}
+
+/// The coarsest of [`STRIDES`] (1 if none) at which a side's depths `at(0..=BLOCK_CELLS)` stay
+/// within `tol` samples, at `reach` samples per unit of depth, of the straight lines between
+/// every s-th point.
+fn side_stride(at: &dyn Fn(u32) -> f32, reach: f32, tol: f32) -> u32 {
+    let k = BLOCK_CELLS;
+    STRIDES
+        .into_iter()
+        .find(|&s| {
+            (0..=k).all(|x| {
+                let c = (x / s * s).min(k - s);
+                let u = (x - c) as f32 / s as f32;
+                let line = at(c) + (at(c + s) - at(c)) * u;
+                (at(x) - line).abs() * reach <= tol
+            })
+        })
+        .unwrap_or(1)
+}
+
+/// The coarsest of [`STRIDES`] (1 if none) at which every grid point `f(a, b)` of a block lies
+/// within `tol` samples, at `reach` samples per unit of depth, of the coarse cell's triangle
+/// under it, split along the diagonal from `(s, 0)` to `(0, s)` as the cells are.
+fn block_stride(f: impl Fn(u32, u32) -> f32, reach: f32, tol: f32) -> u32 {
+    let k = BLOCK_CELLS;
+    STRIDES
+        .into_iter()
+        .find(|&s| {
+            (0..=k).all(|b| {
+                (0..=k).all(|a| {
+                    let (ca, cb) = ((a / s * s).min(k - s), (b / s * s).min(k - s));
+                    let (u, v) = ((a - ca) as f32 / s as f32, (b - cb) as f32 / s as f32);
+                    let (f00, f10, f01) = (f(ca, cb), f(ca + s, cb), f(ca, cb + s));
+                    let coarse = if u + v <= 1.0 {
+                        f00 + (f10 - f00) * u + (f01 - f00) * v
+                    } else {
+                        let f11 = f(ca + s, cb + s);
+                        f11 + (f01 - f11) * (1.0 - u) + (f10 - f11) * (1.0 - v)
+                    };
+                    (f(a, b) - coarse).abs() * reach <= tol
+                })
+            })
+        })
+        .unwrap_or(1)
 }
 
 /// The least and the greatest of `depths`.

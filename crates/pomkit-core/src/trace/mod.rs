@@ -22,10 +22,15 @@ use glam::{DVec2, DVec3, Vec2, Vec3};
 use crate::bake::{NormalBakeOptions, NormalFilter, bake_normals};
 use crate::cone::{ConeMap, ConeMapError};
 use crate::heightfield::{EdgeMode, HeightField, MipChain};
+pub use crate::modes::{
+    MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MAX_SAMPLES, MIN_PERSPECTIVE_BIAS, Technique, UnknownTechnique,
+};
 use crate::pyramid::MaxHeightPyramid;
 
+mod cone;
 mod exact;
 pub mod packet;
+pub(crate) mod shadow_march;
 mod surface;
 
 pub(crate) use exact::*;
@@ -33,39 +38,6 @@ pub use surface::Surface;
 
 /// The flattest ray accepted, as `-dz` of the unit direction; flatter rays are steepened to it.
 pub const MIN_COS: f32 = 1e-3;
-
-/// The most samples any technique takes in one trace; larger requests are clamped (docs/LIMITS.md,
-/// "Parameters").
-pub const MAX_SAMPLES: u32 = 1024;
-
-/// The deepest relief accepted: `depth_scale` is at most this many UV units (tile widths).
-///
-/// `depth_scale` is the depth of the deepest point below the polygon relative to the width of
-/// one texture tile. Parallax mapping models the relief as a shallow displacement seen through
-/// the polygon: at 1 it is already as deep as the tile is wide (slopes of 45 degrees across the
-/// whole tile), and beyond a few tile widths a view ray crosses many tiles before it reaches
-/// the bottom (up to `depth_scale / MIN_COS`, 1000 tile widths per unit of depth scale, at the
-/// flattest ray accepted), so the picture is the texture smeared along the ray while the cost of
-/// every marching technique, and of `exact`, grows with that length. 16 leaves ample room above
-/// any value that shows relief (the viewer's slider stops at 0.3) and keeps the exact tracer's
-/// worst case bounded ([`Technique::fetch_bound`]). [`TraceParams::validate`] refuses larger
-/// values; [`TraceParams::sanitized`] clamps them.
-pub const MAX_DEPTH_SCALE: f32 = 16.0;
-
-/// The smallest `perspective_bias` accepted (see [`MAX_PERSPECTIVE_BIAS`]).
-pub const MIN_PERSPECTIVE_BIAS: f32 = 0.0;
-
-/// The largest `perspective_bias` accepted.
-///
-/// `pom-classic` scales the parallax vector by `b(cos) = pb + (1 - pb) (2 cos - 1)`, clamped at 0,
-/// where `cos` is the cosine of the view angle: 1 head-on for every `pb`, and `2 pb - 1` at
-/// grazing. For `pb` in `[0, 1]` the factor stays in `[0, 1]`: 1 traces the exact parallax
-/// length, smaller values shorten the trace toward grazing angles, down to 0 (which switches the
-/// parallax off from 60 degrees on). Above 1 the trace is longer than the ray itself (the hit is
-/// reported at a depth the ray has not reached there), and below 0 the parallax vanishes at ever
-/// steeper angles; both are refused by [`TraceParams::validate`] and clamped by
-/// [`TraceParams::sanitized`].
-pub const MAX_PERSPECTIVE_BIAS: f32 = 1.0;
 
 /// A ray entering the polygon.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -104,85 +76,7 @@ pub struct Hit {
     pub fetches: u32,
 }
 
-/// The tracing techniques of docs/REFERENCES.md.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Technique {
-    /// Plain texturing: no offset, geometric normal. 0 fetches.
-    Flat,
-    /// Normal mapping only: no offset. 0 fetches.
-    Normal,
-    /// One-sample parallax (Kaneko 2001) with Welsh's offset limiting: the offset is
-    /// `d * depth_scale * (du, dv)` for a unit direction, never longer than the depth itself.
-    /// 1 fetch. Swims and flattens at grazing angles.
-    Parallax,
-    /// Lengyel's iterative parallax (Listing 7.9) on a parallax map `n_z * d`: `k` steps of a
-    /// `1/k` share of the locally estimated offset. `k` fetches. Better on slopes, still no
-    /// occlusion.
-    Iterative,
-    /// Steep parallax (McGuire 2005): `n` depth planes, the first plane below the height field.
-    /// At most `n` fetches. Stair-steps between planes.
-    Steep,
-    /// Brawley & Tatarchuk 2004: the parallax vector scaled by the perspective bias, 8 fixed
-    /// samples (all fetched: the article's shader has no early exit), line-line intersection.
-    /// 8 fetches. Misses features thinner than 1/8 of the trace.
-    PomClassic,
-    /// Zink / Tatarchuk 2006: between `n_min` and `n_max` samples (more at grazing angles),
-    /// early exit, piecewise-linear intersection, optional secant refinement. At most
-    /// `n_max + 1 + refine` fetches.
-    Pom,
-    /// Relief mapping (Policarpo 2005): linear search then `k` binary steps. At most
-    /// `n + k` fetches.
-    Relief,
-    /// The exact first intersection with the bilinear surface of the mip-0 texels, by
-    /// maximum-height pyramid traversal. Never misses a feature; O(log size) fetches typically.
-    Exact,
-    /// Cone stepping (Dummer 2006; Policarpo & Oliveira 2007) on the surface's cone map
-    /// ([`crate::cone`]): jumps as far as each footprint's cone allows, texel by texel where the
-    /// ray is below a footprint's top, then `binary_steps` of binary search in the step that
-    /// ended below the surface. With the cones pomkit builds (conservative) the hit is exact,
-    /// as `exact`'s; with a baked map read from an image, relaxed cone stepping. Bounded as
-    /// `exact` is ([`Surface::cone_fetch_bound`]).
-    Cone,
-}
-
 impl Technique {
-    /// Every technique: the published ones, cheapest first, then pomkit's own.
-    pub const ALL: [Technique; 10] = [
-        Technique::Flat,
-        Technique::Normal,
-        Technique::Parallax,
-        Technique::Iterative,
-        Technique::Steep,
-        Technique::PomClassic,
-        Technique::Pom,
-        Technique::Relief,
-        Technique::Exact,
-        Technique::Cone,
-    ];
-
-    /// The name used by the command line and scene files.
-    #[must_use]
-    pub const fn name(self) -> &'static str {
-        match self {
-            Technique::Flat => "flat",
-            Technique::Normal => "normal",
-            Technique::Parallax => "parallax",
-            Technique::Iterative => "iterative",
-            Technique::Steep => "steep",
-            Technique::PomClassic => "pom-classic",
-            Technique::Pom => "pom",
-            Technique::Relief => "relief",
-            Technique::Exact => "exact",
-            Technique::Cone => "cone",
-        }
-    }
-
-    /// Whether the technique displaces the texture coordinate at all.
-    #[must_use]
-    pub const fn displaces(self) -> bool {
-        !matches!(self, Technique::Flat | Technique::Normal)
-    }
-
     /// The most fetches one view trace may take with `params` (the bound the tests check).
     ///
     /// Every technique's loops run a fixed number of times (each at most [`MAX_SAMPLES`], or 64
@@ -202,36 +96,6 @@ impl Technique {
             Technique::Exact => surface.exact_fetch_bound(),
             Technique::Cone => surface.cone_fetch_bound(p.binary_steps),
         }
-    }
-}
-
-impl std::fmt::Display for Technique {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// A technique name that pomkit does not know.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct UnknownTechnique(pub String);
-
-impl std::fmt::Display for UnknownTechnique {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let names: Vec<&str> = Technique::ALL.iter().map(|t| t.name()).collect();
-        write!(f, "unknown technique '{}': expected one of {}", self.0, names.join(", "))
-    }
-}
-
-impl std::error::Error for UnknownTechnique {}
-
-impl std::str::FromStr for Technique {
-    type Err = UnknownTechnique;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let t = s.trim();
-        Technique::ALL
-            .into_iter()
-            .find(|k| k.name().eq_ignore_ascii_case(t))
-            .ok_or_else(|| UnknownTechnique(s.to_owned()))
     }
 }
 
@@ -262,11 +126,11 @@ pub struct TraceParams {
 impl TraceParams {
     /// The defaults, from the parameter table ([`crate::params`]; evaluated when building).
     pub const DEFAULT: Self = {
-        use crate::params as p;
+        use crate::table as p;
         Self {
             min_samples: p::MIN_SAMPLES.default.u32(),
-            max_samples: p::MAX_SAMPLES_PARAM.default.u32(),
-            samples: p::SAMPLES_PARAM.default.u32(),
+            max_samples: p::MAX_SAMPLES.default.u32(),
+            samples: p::SAMPLES.default.u32(),
             iterations: p::ITERATIONS.default.u32(),
             binary_steps: p::BINARY_STEPS.default.u32(),
             refine: p::REFINE.default.u32(),
@@ -382,11 +246,11 @@ pub fn sanitized_depth_scale(depth_scale: f32) -> f32 {
     if depth_scale.is_finite() && depth_scale > 0.0 {
         depth_scale.min(MAX_DEPTH_SCALE)
     } else {
-        crate::params::DEPTH_SCALE.default.f32()
+        crate::table::DEPTH_SCALE.default.f32()
     }
 }
 
-/// The most steps of [`crate::cone::first_hit`] for a view ray on `surface` (at its depth
+/// The most steps of [`cone::first_hit`] for a view ray on `surface` (at its depth
 /// scale): two per texel boundary crossed (a step above a footprint's top ends at the top or
 /// past a boundary; a step at or below it crosses the footprint), over the longest ray accepted.
 pub(crate) fn cone_step_bound(surface: &Surface) -> u64 {
@@ -737,13 +601,13 @@ fn exact_view(surface: &Surface, uv0: Vec2, s: Vec2) -> Hit {
     Hit { uv: Vec2::new((p.x / size.x) as f32, (p.y / size.y) as f32), depth: t as f32, fetches: r.fetches }
 }
 
-/// The cone view trace ([`crate::cone::first_hit`]) from depth 0 down to depth 1.
+/// The cone view trace ([`cone::first_hit`]) from depth 0 down to depth 1.
 fn cone_view(surface: &Surface, uv0: Vec2, s: Vec2, p: &TraceParams) -> Hit {
     let f = surface.field();
     let size = DVec2::new(f64::from(f.width()), f64::from(f.height()));
     let o = DVec3::new(f64::from(uv0.x) * size.x, f64::from(uv0.y) * size.y, 0.0);
     let d = DVec3::new(f64::from(s.x) * size.x, f64::from(s.y) * size.y, 1.0);
-    let r = crate::cone::first_hit(surface, o, d, 0.0, 1.0, p);
+    let r = cone::first_hit(surface, o, d, 0.0, 1.0, p);
     let t = r.t.unwrap_or(1.0).clamp(0.0, 1.0);
     let q = o + d * t;
     Hit { uv: Vec2::new((q.x / size.x) as f32, (q.y / size.y) as f32), depth: t as f32, fetches: r.fetches }

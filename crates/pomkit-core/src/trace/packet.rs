@@ -20,10 +20,10 @@
 use fearless_simd::{Select, Simd, SimdBase, SimdFloat, SimdMask, f32x8, mask32x8};
 use glam::{Vec2, Vec3};
 
+use super::shadow_march::{Shadow, ShadowMarch};
 use super::{Hit, Ray, Surface, Technique, TraceParams, adaptive_samples, entering, hit_on_ray};
 use super::{reduce_to_tile, trace_entering, unreduce, uv_per_depth};
 use crate::heightfield::{EdgeMode, HeightField, MipChain};
-use crate::shadow::{Shadow, ShadowMarch};
 
 /// Rays per packet.
 pub const LANES: usize = 8;
