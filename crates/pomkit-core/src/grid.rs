@@ -380,3 +380,168 @@ pub fn coarsest_level(mut width: u32, mut height: u32) -> u32 {
     }
     k
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Texel `(x, y)` holds `x + 4y`: small whole numbers, so bilinear weights that are
+    /// multiples of 1/4 give exact results.
+    fn ramp(w: u32, h: u32) -> Grid<f32> {
+        Grid::from_fn(w, h, |x, y| (x + 4 * y) as f32)
+    }
+
+    #[test]
+    fn wrap_is_the_euclidean_remainder() {
+        for size in [1u32, 2, 3, 7, 512, 1000, 1 << 20, i32::MAX as u32, 1 << 31, u32::MAX] {
+            let far = [i64::MIN, i64::MIN + 1, -(1 << 40), i64::from(i32::MIN) - 1, i64::from(i32::MIN)];
+            let far2 = [i64::from(i32::MAX), i64::from(i32::MAX) + 1, i64::MAX - 1, i64::MAX];
+            for i in (-1100i64..1100).chain(far).chain(far2) {
+                let want = i.rem_euclid(i64::from(size)) as u32;
+                assert_eq!(EdgeMode::Wrap.resolve(i, size), want, "{i} {size}");
+            }
+        }
+    }
+
+    #[test]
+    fn resolve_pair_is_two_resolves() {
+        for edges in EdgeMode::ALL {
+            for size in [1u32, 2, 3, 7, 512] {
+                let far = [i64::MIN, i64::MIN + 1, -(1 << 40), i64::MAX - 1, i64::MAX];
+                for i in (-1100i64..1100).chain(far) {
+                    let want = (edges.resolve(i, size), edges.resolve(i.saturating_add(1), size));
+                    assert_eq!(edges.resolve_pair(i, size), want, "{edges:?} {i} {size}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn wrap_and_clamp_any_size() {
+        assert_eq!(EdgeMode::Wrap.resolve(-1, 5), 4);
+        assert_eq!(EdgeMode::Wrap.resolve(5, 5), 0);
+        assert_eq!(EdgeMode::Wrap.resolve(-11, 5), 4);
+        assert_eq!(EdgeMode::Clamp.resolve(-3, 5), 0);
+        assert_eq!(EdgeMode::Clamp.resolve(9, 5), 4);
+    }
+
+    #[test]
+    fn construction_checks_the_size_and_from_fn_fills_row_by_row() {
+        assert!(Grid::<f32>::new(0, 2, vec![]).is_none());
+        assert!(Grid::new(2, 2, vec![0.0f32; 3]).is_none());
+        let g = Grid::new(3, 2, vec![0.0f32, 1.0, 2.0, 4.0, 5.0, 6.0]).unwrap();
+        assert_eq!(g, ramp(3, 2));
+        assert_eq!((g.width(), g.height(), g.size_f32()), (3, 2, Vec2::new(3.0, 2.0)));
+        assert_eq!(g.at(2, 1, EdgeMode::Wrap), 6.0);
+        assert_eq!(g.at(3, -1, EdgeMode::Wrap), 4.0);
+        assert_eq!(g.at(3, -1, EdgeMode::Clamp), 2.0);
+        let one = Grid::from_fn(0, 0, |_, _| 7.0f32);
+        assert_eq!((one.width(), one.height(), one.texels()), (1, 1, &[7.0][..]));
+    }
+
+    #[test]
+    fn bilinear_reproduces_a_linear_ramp_exactly_between_texel_centres() {
+        // Power-of-two sides, so that UV <-> texel conversions are exact too.
+        for (w, h, edges) in [(8u32, 4u32, EdgeMode::Wrap), (4, 8, EdgeMode::Clamp), (16, 2, EdgeMode::Clamp)] {
+            let g = ramp(w, h);
+            let colours = g.clone().map(|v| Vec3::new(v, 2.0 * v, -v));
+            // Every point between the first and the last texel centres, in steps of 1/4 texel:
+            // the ramp's value there is x + 4y with x = u * w - 0.5, y = v * h - 0.5.
+            for qy in 0..=(4 * (h - 1)) {
+                for qx in 0..=(4 * (w - 1)) {
+                    let (x, y) = (qx as f32 / 4.0, qy as f32 / 4.0);
+                    let uv = Vec2::new((x + 0.5) / w as f32, (y + 0.5) / h as f32);
+                    let want = x + 4.0 * y;
+                    assert_eq!(g.sample_bilinear(uv, edges), want, "{edges:?} ({x}, {y})");
+                    assert_eq!(colours.sample_bilinear(uv, edges), Vec3::new(want, 2.0 * want, -want), "({x}, {y})");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bilinear_wraps_or_clamps_beyond_the_outer_texel_centres() {
+        let g = ramp(4, 3);
+        // A quarter texel left of the first column's centre, on row 1: wrapping blends a
+        // quarter of the last column (7) into the first (4); clamping gives the first.
+        let uv = Vec2::new(0.25 / 4.0, 1.5 / 3.0);
+        assert_eq!(g.sample_bilinear(uv, EdgeMode::Wrap), 0.75 * 4.0 + 0.25 * 7.0);
+        assert_eq!(g.sample_bilinear(uv, EdgeMode::Clamp), 4.0);
+        // Halfway past the bottom row's centre, on column 2: rows 2 (10) and 0 (2) when
+        // wrapping, row 2 when clamping.
+        let uv = Vec2::new(2.5 / 4.0, 1.0);
+        assert_eq!(g.sample_bilinear(uv, EdgeMode::Wrap), 6.0);
+        assert_eq!(g.sample_bilinear(uv, EdgeMode::Clamp), 10.0);
+        // One whole tile on, wrapping samples the same point.
+        let uv = Vec2::new(0.3125, 0.625);
+        assert_eq!(g.sample_bilinear(uv + Vec2::ONE, EdgeMode::Wrap), g.sample_bilinear(uv, EdgeMode::Wrap));
+        // Non-finite coordinates fall back to the corner instead of panicking.
+        assert_eq!(g.sample_bilinear(Vec2::NAN, EdgeMode::Clamp), 0.0);
+        assert_eq!(g.sample_nearest(Vec2::new(f32::INFINITY, 0.0), EdgeMode::Wrap), 0.0);
+        // Nearest: the containing texel, wrapped or clamped.
+        assert_eq!(g.sample_nearest(Vec2::new(0.6, 0.9), EdgeMode::Clamp), 10.0);
+        assert_eq!(g.sample_nearest(Vec2::new(-0.1, 0.5), EdgeMode::Wrap), 7.0);
+        assert_eq!(g.sample_nearest(Vec2::new(-0.1, 0.5), EdgeMode::Clamp), 4.0);
+    }
+
+    #[test]
+    fn downsampling_a_constant_gives_the_constant_for_any_size() {
+        for (w, h) in [(8, 8), (7, 5), (3, 1), (1, 9), (13, 6), (1, 1), (5, 2)] {
+            // 0.375 and its sums of up to 9 terms are exact in f32.
+            let c = Grid::from_fn(w, h, |_, _| 0.375f32);
+            let v = Grid::from_fn(w, h, |_, _| Vec3::new(0.375, 0.5, 0.25));
+            let sides = ((w / 2).max(1), (h / 2).max(1));
+            for d in [c.downsample_box(), c.downsample_area()] {
+                assert_eq!((d.width(), d.height()), sides, "{w}x{h}");
+                assert!(d.texels().iter().all(|&t| t == 0.375), "{w}x{h}: {:?}", d.texels());
+            }
+            for d in [v.downsample_box(), v.downsample_area()] {
+                assert_eq!((d.width(), d.height()), sides, "{w}x{h}");
+                assert!(d.texels().iter().all(|&t| t == Vec3::new(0.375, 0.5, 0.25)), "{w}x{h}");
+            }
+        }
+        // Not exact in binary: the f64 sum of the exact-footprint filter still rounds back.
+        let c = Grid::from_fn(7, 3, |_, _| 0.3f32);
+        assert!(c.downsample_area().texels().iter().all(|&t| t == 0.3), "{:?}", c.downsample_area());
+    }
+
+    #[test]
+    fn odd_sides_fold_in_the_last_texel_or_weigh_the_exact_footprint() {
+        // One row 0, 1, 2, 3, 4: two coarse texels.
+        let g = Grid::from_fn(5, 1, |x, _| x as f32);
+        // 2x2 box: (0 + 1) / 2, then the last block takes three texels: (2 + 3 + 4) / 3.
+        assert_eq!(g.downsample_box().texels(), &[0.5, 3.0]);
+        // Exact footprint: each coarse texel covers 2.5 fine ones.
+        // (0 + 1 + 2 / 2) / 2.5 and (2 / 2 + 3 + 4) / 2.5.
+        let area = g.downsample_area();
+        assert!((area.texels()[0] - 0.8).abs() < 1e-6 && (area.texels()[1] - 3.2).abs() < 1e-6, "{area:?}");
+        // 3 wide: one texel, the mean of all three either way.
+        let g = Grid::from_fn(3, 3, |x, y| (x + 3 * y) as f32);
+        assert_eq!(g.downsample_box().texels(), &[4.0]);
+        assert_eq!(g.downsample_area().texels(), &[4.0]);
+        // An even block is a plain mean.
+        let g = Grid::from_fn(4, 2, |x, y| (x + 4 * y) as f32);
+        assert_eq!(g.downsample_box().texels(), &[2.5, 4.5]);
+        assert_eq!(g.downsample_area().texels(), &[2.5, 4.5]);
+    }
+
+    #[test]
+    fn mip_chains_halve_down_to_one_texel() {
+        for (w, h) in [(1, 1), (2, 1), (512, 512), (640, 48), (3, 7), (1, 1000)] {
+            let chain = Grid::from_fn(w, h, |x, y| (x ^ y) as f32).mip_chain(Grid::downsample_box);
+            assert_eq!(chain.len() as u32, coarsest_level(w, h) + 1, "{w}x{h}");
+            for pair in chain.windows(2) {
+                assert_eq!(
+                    (pair[1].width(), pair[1].height()),
+                    ((pair[0].width() / 2).max(1), (pair[0].height() / 2).max(1))
+                );
+                assert_eq!(pair[1], pair[0].downsample_box());
+            }
+            let last = chain.last().unwrap();
+            assert_eq!((last.width(), last.height()), (1, 1));
+        }
+        assert_eq!(coarsest_level(1, 1), 0);
+        assert_eq!(coarsest_level(640, 48), 9);
+        assert_eq!(coarsest_level(3, 7), 2);
+    }
+}

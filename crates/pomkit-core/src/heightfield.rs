@@ -390,4 +390,109 @@ mod tests {
         assert!((chain.sample(uv, 0.5, EdgeMode::Clamp) - 0.25).abs() < 1e-6);
         assert_eq!(chain.sample(uv, 99.0, EdgeMode::Clamp), 0.5);
     }
+
+    /// The sampling and the mip chain as they were written before [`Grid`] held them, to
+    /// compare bit for bit.
+    mod before {
+        use super::*;
+
+        pub fn bilinear(w: u32, h: u32, depth: &[f32], uv: Vec2, edges: EdgeMode) -> f32 {
+            let t = uv * Vec2::new(w as f32, h as f32) - 0.5;
+            let t = if t.is_finite() { t } else { Vec2::ZERO };
+            let f = Vec2::new(floor(t.x), floor(t.y));
+            let (fx, fy) = (t.x - f.x, t.y - f.y);
+            let (x0, y0) = (f.x as i64, f.y as i64);
+            if x0 >= 0 && y0 >= 0 && x0 < i64::from(w) - 1 && y0 < i64::from(h) - 1 {
+                let at = y0 as usize * w as usize + x0 as usize;
+                let (d00, d10) = (depth[at], depth[at + 1]);
+                let (d01, d11) = (depth[at + w as usize], depth[at + w as usize + 1]);
+                let top = d00 + (d10 - d00) * fx;
+                let bottom = d01 + (d11 - d01) * fx;
+                return top + (bottom - top) * fy;
+            }
+            let (xa, xb) = edges.resolve_pair(x0, w);
+            let (ya, yb) = edges.resolve_pair(y0, h);
+            let row = |y: u32| y as usize * w as usize;
+            let (d00, d10) = (depth[row(ya) + xa as usize], depth[row(ya) + xb as usize]);
+            let (d01, d11) = (depth[row(yb) + xa as usize], depth[row(yb) + xb as usize]);
+            let top = d00 + (d10 - d00) * fx;
+            let bottom = d01 + (d11 - d01) * fx;
+            top + (bottom - top) * fy
+        }
+
+        fn weights(n: u32, m: u32) -> Vec<Vec<(u32, f64)>> {
+            let ratio = f64::from(n) / f64::from(m);
+            (0..m)
+                .map(|o| {
+                    let (a, b) = (f64::from(o) * ratio, f64::from(o + 1) * ratio);
+                    let last = (b.ceil() as u32).min(n);
+                    (a.floor() as u32..last)
+                        .filter_map(|s| {
+                            let overlap = (b.min(f64::from(s + 1)) - a.max(f64::from(s))).max(0.0);
+                            (overlap > 0.0).then_some((s, overlap / ratio))
+                        })
+                        .collect()
+                })
+                .collect()
+        }
+
+        pub fn downsample(w: u32, h: u32, depth: &[f32]) -> (u32, u32, Vec<f32>) {
+            let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+            let (wx, wy) = (weights(w, nw), weights(h, nh));
+            let mut out = vec![0.0f32; nw as usize * nh as usize];
+            for (oy, row_weights) in wy.iter().enumerate() {
+                for (ox, col_weights) in wx.iter().enumerate() {
+                    let mut acc = 0.0f64;
+                    for &(sy, wyv) in row_weights {
+                        for &(sx, wxv) in col_weights {
+                            acc += f64::from(depth[sy as usize * w as usize + sx as usize]) * wyv * wxv;
+                        }
+                    }
+                    out[oy * nw as usize + ox] = (acc as f32).clamp(0.0, 1.0);
+                }
+            }
+            (nw, nh, out)
+        }
+    }
+
+    /// A field of irregular depths over the whole of `[0, 1]`, ends included.
+    fn irregular(w: u32, h: u32) -> HeightField {
+        HeightField::from_height_fn(w, h, |x, y| {
+            let k = (x.wrapping_mul(2_654_435_761) ^ y.wrapping_mul(40_503)).rotate_left(7);
+            if k % 11 == 0 { f32::from(k % 2 == 0) } else { (k % 10_007) as f32 / 10_006.0 }
+        })
+    }
+
+    #[test]
+    fn sampling_and_mips_match_the_former_per_type_code_bit_for_bit() {
+        let bits = |v: &[f32]| v.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        for (w, h) in [(1, 1), (1, 7), (6, 1), (2, 2), (7, 5), (16, 16), (33, 12), (77, 53)] {
+            let hf = irregular(w, h);
+            for edges in EdgeMode::ALL {
+                for k in 0..2000u32 {
+                    // UVs inside, on, and well beyond the tile, some far away.
+                    let u = (k.wrapping_mul(7919) % 4001) as f32 / 1000.0 - 1.5;
+                    let v = (k.wrapping_mul(104_729) % 3001) as f32 / 1000.0 - 1.0;
+                    let uv = if k % 97 == 0 { Vec2::new(u * 1e7, v) } else { Vec2::new(u, v) };
+                    let want = before::bilinear(w, h, hf.depths(), uv, edges);
+                    assert_eq!(hf.sample_bilinear(uv, edges).to_bits(), want.to_bits(), "{w}x{h} {edges:?} {uv}");
+                }
+            }
+            let chain = MipChain::new(hf.clone());
+            let (mut lw, mut lh, mut level) = (w, h, hf.depths().to_vec());
+            for k in 0..chain.len() {
+                let got = chain.level(k);
+                assert_eq!(
+                    (got.width(), got.height(), bits(got.depths())),
+                    (lw, lh, bits(&level)),
+                    "{w}x{h} level {k}"
+                );
+                (lw, lh, level) = before::downsample(lw, lh, &level);
+            }
+            assert_eq!((chain.level(chain.len() - 1).width(), chain.level(chain.len() - 1).height()), (1, 1));
+            let (dw, dh, d) = before::downsample(w, h, hf.depths());
+            let down = hf.downsample();
+            assert_eq!((down.width(), down.height(), bits(down.depths())), (dw, dh, bits(&d)), "{w}x{h}");
+        }
+    }
 }

@@ -575,6 +575,107 @@ mod tests {
         assert_eq!(NormalMap::new(1, 1, vec![Vec3::ZERO]).unwrap().normals(), &[Vec3::Z]);
     }
 
+    /// Texture and normal map sampling and the texture mip chain as they were written before
+    /// [`Grid`] held them, to compare bit for bit.
+    mod before {
+        use super::*;
+
+        pub fn bilinear_vec3(texels: &[Vec3], width: u32, height: u32, uv: Vec2, edges: EdgeMode) -> Vec3 {
+            if width == 1 && height == 1 {
+                return texels[0];
+            }
+            let t = uv * Vec2::new(width as f32, height as f32) - 0.5;
+            let t = if t.is_finite() { t } else { Vec2::ZERO };
+            let f = Vec2::new(crate::heightfield::floor(t.x), crate::heightfield::floor(t.y));
+            let (fx, fy) = (t.x - f.x, t.y - f.y);
+            let (x0, y0) = (f.x as i64, f.y as i64);
+            if x0 >= 0 && y0 >= 0 && x0 < i64::from(width) - 1 && y0 < i64::from(height) - 1 {
+                let at = y0 as usize * width as usize + x0 as usize;
+                let below = at + width as usize;
+                let top = texels[at].lerp(texels[at + 1], fx);
+                let bottom = texels[below].lerp(texels[below + 1], fx);
+                return top.lerp(bottom, fy);
+            }
+            let at = |x: i64, y: i64| {
+                let xi = edges.resolve(x, width) as usize;
+                let yi = edges.resolve(y, height) as usize;
+                texels[yi * width as usize + xi]
+            };
+            let (x1, y1) = (x0.saturating_add(1), y0.saturating_add(1));
+            let top = at(x0, y0).lerp(at(x1, y0), fx);
+            let bottom = at(x0, y1).lerp(at(x1, y1), fx);
+            top.lerp(bottom, fy)
+        }
+
+        pub fn downsample(width: u32, height: u32, texels: &[Vec3]) -> (u32, u32, Vec<Vec3>) {
+            let (nw, nh) = ((width / 2).max(1), (height / 2).max(1));
+            let mut out = Vec::with_capacity(nw as usize * nh as usize);
+            for y in 0..nh {
+                for x in 0..nw {
+                    let (x0, y0) = (x * width / nw, y * height / nh);
+                    let (x1, y1) = (((x + 1) * width / nw).max(x0 + 1), ((y + 1) * height / nh).max(y0 + 1));
+                    let mut acc = Vec3::ZERO;
+                    for yy in y0..y1 {
+                        for xx in x0..x1 {
+                            acc += texels[(yy * width + xx) as usize];
+                        }
+                    }
+                    out.push(acc / ((x1 - x0) * (y1 - y0)) as f32);
+                }
+            }
+            (nw, nh, out)
+        }
+
+        /// pomkit-cpu's albedo chain: the texture, then downsampled until 1x1.
+        pub fn mip_chain(width: u32, height: u32, texels: Vec<Vec3>) -> Vec<(u32, u32, Vec<Vec3>)> {
+            let mut chain = vec![(width, height, texels)];
+            while let Some(last) = chain.last().filter(|t| t.0 > 1 || t.1 > 1) {
+                let next = downsample(last.0, last.1, &last.2);
+                chain.push(next);
+            }
+            chain
+        }
+    }
+
+    fn irregular_vec3(w: u32, h: u32) -> Vec<Vec3> {
+        (0..w * h)
+            .map(|k| {
+                let r = k.wrapping_mul(2_654_435_761).rotate_left(9);
+                Vec3::new((r % 1009) as f32 / 1008.0, (r % 997) as f32 / 331.0 - 1.0, (r % 101) as f32 / 7.0 - 3.0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn textures_and_normal_maps_match_the_former_per_type_code_bit_for_bit() {
+        let bits = |v: &[Vec3]| v.iter().flat_map(|c| c.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+        for (w, h) in [(1, 1), (1, 7), (6, 1), (2, 2), (7, 5), (16, 16), (33, 12), (67, 45)] {
+            let texels = irregular_vec3(w, h);
+            let t = Texture::new(w, h, texels.clone()).unwrap();
+            let n = NormalMap::new(w, h, texels.clone()).unwrap();
+            for edges in EdgeMode::ALL {
+                for k in 0..1000u32 {
+                    let u = (k.wrapping_mul(7919) % 4001) as f32 / 1000.0 - 1.5;
+                    let v = (k.wrapping_mul(104_729) % 3001) as f32 / 1000.0 - 1.0;
+                    let uv = if k % 97 == 0 { Vec2::new(u, v * 1e7) } else { Vec2::new(u, v) };
+                    let want = before::bilinear_vec3(&texels, w, h, uv, edges);
+                    assert_eq!(bits(&[t.sample(uv, edges)]), bits(&[want]), "{w}x{h} {edges:?} {uv}");
+                    let want = before::bilinear_vec3(n.normals(), w, h, uv, edges).try_normalize().unwrap_or(Vec3::Z);
+                    assert_eq!(bits(&[n.sample(uv, edges)]), bits(&[want]), "{w}x{h} {edges:?} {uv}");
+                }
+            }
+            let (dw, dh, d) = before::downsample(w, h, &texels);
+            let down = t.downsample();
+            assert_eq!((down.width(), down.height(), bits(down.texels())), (dw, dh, bits(&d)), "{w}x{h}");
+            let chain = t.mip_chain();
+            let want = before::mip_chain(w, h, texels);
+            assert_eq!(chain.len(), want.len(), "{w}x{h}");
+            for (k, (got, want)) in chain.iter().zip(&want).enumerate() {
+                assert_eq!((got.width(), got.height(), bits(got.texels())), (want.0, want.1, bits(&want.2)), "{k}");
+            }
+        }
+    }
+
     fn plane_scene(camera: Camera, size: f32) -> Scene {
         let mesh = Arc::new(Mesh::plane(Vec2::splat(size), 1));
         Scene {
