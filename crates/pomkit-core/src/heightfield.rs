@@ -1,4 +1,5 @@
-//! Height fields: storage, edge modes, nearest and bilinear sampling, mip chains.
+//! Height fields: depths over a [`Grid`] (storage, edge modes, nearest and bilinear sampling),
+//! their box-filtered mip chains.
 //!
 //! Conventions (ARCHITECTURE.md):
 //! - pomkit stores *depth* `d` in `[0, 1]`: 0 is the polygon's surface, 1 the deepest point.
@@ -11,96 +12,8 @@
 
 use glam::Vec2;
 
-/// What happens to texel coordinates outside the image.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum EdgeMode {
-    /// The image tiles: texel `-1` is the last texel (`GL_REPEAT`). The default.
-    #[default]
-    Wrap,
-    /// Coordinates clamp to the border texel (`GL_CLAMP_TO_EDGE`).
-    Clamp,
-}
-
-impl EdgeMode {
-    /// Both modes.
-    pub const ALL: [EdgeMode; 2] = [EdgeMode::Wrap, EdgeMode::Clamp];
-
-    /// The name scene files and the command line use.
-    #[must_use]
-    pub const fn name(self) -> &'static str {
-        match self {
-            EdgeMode::Wrap => "wrap",
-            EdgeMode::Clamp => "clamp",
-        }
-    }
-
-    /// The mode named `name` (case-insensitive), if any.
-    #[must_use]
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|e| e.name().eq_ignore_ascii_case(name))
-    }
-
-    /// Maps an integer texel coordinate into `0..size` by wrapping or clamping.
-    ///
-    /// # Panics
-    /// Panics in debug builds if `size` is 0.
-    #[inline]
-    #[must_use]
-    pub fn resolve(self, i: i64, size: u32) -> u32 {
-        debug_assert!(size > 0);
-        // Most coordinates are inside already: no division for them.
-        if (0..i64::from(size)).contains(&i) {
-            return i as u32;
-        }
-        match self {
-            // A power-of-two size (the usual texture) wraps by a mask, which two's complement
-            // makes right for negative `i` too; any other by `rem_euclid`, in 32 bits when `i`
-            // fits (a 64-bit division costs several times a 32-bit one).
-            EdgeMode::Wrap if size.is_power_of_two() => (i & (i64::from(size) - 1)) as u32,
-            EdgeMode::Wrap => match (i32::try_from(i), i32::try_from(size)) {
-                (Ok(i), Ok(size)) => i.rem_euclid(size) as u32,
-                _ => i.rem_euclid(i64::from(size)) as u32,
-            },
-            EdgeMode::Clamp => i.clamp(0, i64::from(size) - 1) as u32,
-        }
-    }
-}
-
-impl EdgeMode {
-    /// `(self.resolve(i, size), self.resolve(i.saturating_add(1), size))`, the coordinates of a
-    /// bilinear footprint's two columns (or rows), with one division at most.
-    #[inline]
-    #[must_use]
-    pub fn resolve_pair(self, i: i64, size: u32) -> (u32, u32) {
-        let a = self.resolve(i, size);
-        let b = match self {
-            // The wrapped neighbour of a wrapped coordinate: one step on, or back to 0.
-            EdgeMode::Wrap if i < i64::MAX => {
-                if a + 1 == size {
-                    0
-                } else {
-                    a + 1
-                }
-            }
-            _ => self.resolve(i.saturating_add(1), size),
-        };
-        (a, b)
-    }
-}
-
-/// `x.floor()` without a call into libm on targets without SSE4.1 (the baseline x86-64 this
-/// crate builds for), exact for every finite `x`.
-#[inline]
-#[must_use]
-pub fn floor(x: f32) -> f32 {
-    // Beyond 2^23 every f32 is a whole number already.
-    if x.abs() < 8_388_608.0 {
-        let i = x as i32 as f32;
-        if i > x { i - 1.0 } else { i }
-    } else {
-        x
-    }
-}
+use crate::grid::Grid;
+pub use crate::grid::{EdgeMode, floor};
 
 /// Why a height field could not be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -146,11 +59,20 @@ pub enum HeightFieldError {
 }
 
 /// A rectangular grid of depth samples in `[0, 1]` (0 = surface, 1 = deepest).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct HeightField {
-    width: u32,
-    height: u32,
-    depth: Vec<f32>,
+    grid: Grid<f32>,
+}
+
+impl std::fmt::Debug for HeightField {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let g = &self.grid;
+        f.debug_struct("HeightField")
+            .field("width", &g.width())
+            .field("height", &g.height())
+            .field("depth", &g.texels())
+            .finish()
+    }
 }
 
 impl HeightField {
@@ -161,7 +83,7 @@ impl HeightField {
     /// not finite or lies outside `[0, 1]`.
     pub fn from_depths(width: u32, height: u32, depth: Vec<f32>) -> Result<Self, HeightFieldError> {
         validate(width, height, &depth)?;
-        Ok(Self { width, height, depth })
+        Ok(Self { grid: Grid::from_checked(width, height, depth) })
     }
 
     /// Builds a field from *heights* (1 = surface, 0 = deepest; white = high), row-major.
@@ -173,23 +95,19 @@ impl HeightField {
         for v in &mut h {
             *v = 1.0 - *v;
         }
-        Ok(Self { width, height, depth: h })
+        Ok(Self { grid: Grid::from_checked(width, height, h) })
     }
 
     /// Builds a field by evaluating `height(x, y)` (white = high, in `[0, 1]`; values outside
     /// are clamped, NaN becomes 0) at every texel.
     #[must_use]
     pub fn from_height_fn(width: u32, height: u32, f: impl Fn(u32, u32) -> f32) -> Self {
-        let (width, height) = (width.max(1), height.max(1));
-        let mut depth = Vec::with_capacity(width as usize * height as usize);
-        for y in 0..height {
-            for x in 0..width {
-                let h = f(x, y);
-                let h = if h.is_nan() { 0.0 } else { h.clamp(0.0, 1.0) };
-                depth.push(1.0 - h);
-            }
-        }
-        Self { width, height, depth }
+        let grid = Grid::from_fn(width, height, |x, y| {
+            let h = f(x, y);
+            let h = if h.is_nan() { 0.0 } else { h.clamp(0.0, 1.0) };
+            1.0 - h
+        });
+        Self { grid }
     }
 
     /// A field of constant depth `d` (clamped to `[0, 1]`).
@@ -201,40 +119,38 @@ impl HeightField {
     /// Width in texels (columns).
     #[must_use]
     pub fn width(&self) -> u32 {
-        self.width
+        self.grid.width()
     }
 
     /// Height in texels (rows).
     #[must_use]
     pub fn height(&self) -> u32 {
-        self.height
+        self.grid.height()
     }
 
     /// `(width, height)` as floats, handy for UV <-> texel conversions.
     #[must_use]
     pub fn size_f32(&self) -> Vec2 {
-        Vec2::new(self.width as f32, self.height as f32)
+        self.grid.size_f32()
     }
 
     /// The depth samples, row-major, top row first.
     #[must_use]
     pub fn depths(&self) -> &[f32] {
-        &self.depth
+        self.grid.texels()
     }
 
     /// Heights `1 - d`, row-major (allocates).
     #[must_use]
     pub fn heights(&self) -> Vec<f32> {
-        self.depth.iter().map(|d| 1.0 - d).collect()
+        self.depths().iter().map(|d| 1.0 - d).collect()
     }
 
     /// Depth of texel `(x, y)`, with out-of-range coordinates wrapped or clamped.
     #[inline]
     #[must_use]
     pub fn depth_at(&self, x: i64, y: i64, edges: EdgeMode) -> f32 {
-        let xi = edges.resolve(x, self.width) as usize;
-        let yi = edges.resolve(y, self.height) as usize;
-        self.depth[yi * self.width as usize + xi]
+        self.grid.at(x, y, edges)
     }
 
     /// Height (`1 - depth`) of texel `(x, y)`, with out-of-range coordinates wrapped or clamped.
@@ -249,9 +165,7 @@ impl HeightField {
     /// Non-finite UVs sample texel (0, 0) rather than panic.
     #[must_use]
     pub fn sample_nearest(&self, uv: Vec2, edges: EdgeMode) -> f32 {
-        let t = uv * self.size_f32();
-        let t = if t.is_finite() { t } else { Vec2::ZERO };
-        self.depth_at(t.x.floor() as i64, t.y.floor() as i64, edges)
+        self.grid.sample_nearest(uv, edges)
     }
 
     /// Bilinearly filtered depth at `uv`, interpolating between texel centres. One fetch.
@@ -259,36 +173,7 @@ impl HeightField {
     /// Non-finite UVs sample texel (0, 0) rather than panic.
     #[must_use]
     pub fn sample_bilinear(&self, uv: Vec2, edges: EdgeMode) -> f32 {
-        let t = uv * self.size_f32() - 0.5;
-        let t = if t.is_finite() { t } else { Vec2::ZERO };
-        let f = Vec2::new(floor(t.x), floor(t.y));
-        let (fx, fy) = (t.x - f.x, t.y - f.y);
-        // `as` saturates far outside the i64 range (|uv| * size beyond 9.2e18); the neighbour then
-        // saturates too rather than overflow (such coordinates carry no sub-texel position in f32
-        // anyway).
-        let (x0, y0) = (f.x as i64, f.y as i64);
-        let (w, h) = (i64::from(self.width), i64::from(self.height));
-        if x0 >= 0 && y0 >= 0 && x0 < w - 1 && y0 < h - 1 {
-            // Inside: the four texels without edge handling.
-            let at = y0 as usize * self.width as usize + x0 as usize;
-            let (d00, d10) = (self.depth[at], self.depth[at + 1]);
-            let (d01, d11) = (self.depth[at + self.width as usize], self.depth[at + self.width as usize + 1]);
-            let top = d00 + (d10 - d00) * fx;
-            let bottom = d01 + (d11 - d01) * fx;
-            return top + (bottom - top) * fy;
-        }
-        // The texels depth_at would read at x0, x0 + 1 (saturating) and y0, y0 + 1, each
-        // coordinate resolved once.
-        let (xa, xb) = edges.resolve_pair(x0, self.width);
-        let (ya, yb) = edges.resolve_pair(y0, self.height);
-        let row = |y: u32| y as usize * self.width as usize;
-        let d00 = self.depth[row(ya) + xa as usize];
-        let d10 = self.depth[row(ya) + xb as usize];
-        let d01 = self.depth[row(yb) + xa as usize];
-        let d11 = self.depth[row(yb) + xb as usize];
-        let top = d00 + (d10 - d00) * fx;
-        let bottom = d01 + (d11 - d01) * fx;
-        top + (bottom - top) * fy
+        self.grid.sample_bilinear(uv, edges)
     }
 
     /// The next coarser mip level by a box filter over the exact footprint.
@@ -298,24 +183,14 @@ impl HeightField {
     /// length of its overlap with that footprint, so the mean depth is preserved exactly.
     #[must_use]
     pub fn downsample(&self) -> Self {
-        let nw = (self.width / 2).max(1);
-        let nh = (self.height / 2).max(1);
-        let wx = box_weights(self.width, nw);
-        let wy = box_weights(self.height, nh);
-        let mut depth = vec![0.0f32; nw as usize * nh as usize];
-        for (oy, row_weights) in wy.iter().enumerate() {
-            for (ox, col_weights) in wx.iter().enumerate() {
-                let mut acc = 0.0f64;
-                for &(sy, wyv) in row_weights {
-                    for &(sx, wxv) in col_weights {
-                        acc += f64::from(self.depth[sy as usize * self.width as usize + sx as usize]) * wyv * wxv;
-                    }
-                }
-                depth[oy * nw as usize + ox] = (acc as f32).clamp(0.0, 1.0);
-            }
-        }
-        Self { width: nw, height: nh, depth }
+        Self { grid: downsample_depths(&self.grid) }
     }
+}
+
+/// [`Grid::downsample_area`], each depth then clamped to `[0, 1]` (the `f64` sum may round
+/// past the ends).
+fn downsample_depths(grid: &Grid<f32>) -> Grid<f32> {
+    grid.downsample_area().map(|d| d.clamp(0.0, 1.0))
 }
 
 /// Checks the size and that every sample is finite and in `[0, 1]`.
@@ -336,27 +211,6 @@ fn validate(width: u32, height: u32, samples: &[f32]) -> Result<(), HeightFieldE
         }
     }
     Ok(())
-}
-
-/// For each of the `m` coarse cells over `n` fine cells, the fine indices it overlaps and the
-/// normalized overlap weights.
-fn box_weights(n: u32, m: u32) -> Vec<Vec<(u32, f64)>> {
-    let ratio = f64::from(n) / f64::from(m);
-    (0..m)
-        .map(|o| {
-            let (a, b) = (f64::from(o) * ratio, f64::from(o + 1) * ratio);
-            let mut w = Vec::new();
-            let first = a.floor() as u32;
-            let last = (b.ceil() as u32).min(n);
-            for s in first..last {
-                let overlap = (b.min(f64::from(s + 1)) - a.max(f64::from(s))).max(0.0);
-                if overlap > 0.0 {
-                    w.push((s, overlap / ratio));
-                }
-            }
-            w
-        })
-        .collect()
 }
 
 /// Mip level (lambda) for the given UV derivatives along screen x and y, as a GPU computes it
@@ -382,15 +236,7 @@ impl MipChain {
     /// Builds every level down to 1x1.
     #[must_use]
     pub fn new(base: HeightField) -> Self {
-        let mut levels = vec![base];
-        loop {
-            let last = levels.last().expect("chain starts with the base level");
-            if last.width == 1 && last.height == 1 {
-                break;
-            }
-            let next = last.downsample();
-            levels.push(next);
-        }
+        let levels = base.grid.mip_chain(downsample_depths).into_iter().map(|grid| HeightField { grid }).collect();
         Self { levels }
     }
 
@@ -449,31 +295,6 @@ mod tests {
     }
 
     #[test]
-    fn wrap_is_the_euclidean_remainder() {
-        for size in [1u32, 2, 3, 7, 512, 1000, 1 << 20, i32::MAX as u32, 1 << 31, u32::MAX] {
-            let far = [i64::MIN, i64::MIN + 1, -(1 << 40), i64::from(i32::MIN) - 1, i64::from(i32::MIN)];
-            let far2 = [i64::from(i32::MAX), i64::from(i32::MAX) + 1, i64::MAX - 1, i64::MAX];
-            for i in (-1100i64..1100).chain(far).chain(far2) {
-                let want = i.rem_euclid(i64::from(size)) as u32;
-                assert_eq!(EdgeMode::Wrap.resolve(i, size), want, "{i} {size}");
-            }
-        }
-    }
-
-    #[test]
-    fn resolve_pair_is_two_resolves() {
-        for edges in EdgeMode::ALL {
-            for size in [1u32, 2, 3, 7, 512] {
-                let far = [i64::MIN, i64::MIN + 1, -(1 << 40), i64::MAX - 1, i64::MAX];
-                for i in (-1100i64..1100).chain(far) {
-                    let want = (edges.resolve(i, size), edges.resolve(i.saturating_add(1), size));
-                    assert_eq!(edges.resolve_pair(i, size), want, "{edges:?} {i} {size}");
-                }
-            }
-        }
-    }
-
-    #[test]
     fn rejects_bad_construction() {
         assert!(matches!(HeightField::from_depths(0, 3, vec![]), Err(HeightFieldError::Empty { .. })));
         assert!(matches!(
@@ -496,15 +317,6 @@ mod tests {
         let hf = HeightField::from_heights(2, 1, vec![1.0, 0.25]).unwrap();
         assert_eq!(hf.depths(), &[0.0, 0.75]);
         assert_eq!(hf.height_at(1, 0, EdgeMode::Wrap), 0.25);
-    }
-
-    #[test]
-    fn wrap_and_clamp_any_size() {
-        assert_eq!(EdgeMode::Wrap.resolve(-1, 5), 4);
-        assert_eq!(EdgeMode::Wrap.resolve(5, 5), 0);
-        assert_eq!(EdgeMode::Wrap.resolve(-11, 5), 4);
-        assert_eq!(EdgeMode::Clamp.resolve(-3, 5), 0);
-        assert_eq!(EdgeMode::Clamp.resolve(9, 5), 4);
     }
 
     #[test]
@@ -577,5 +389,110 @@ mod tests {
         assert_eq!(chain.sample(uv, 1.0, EdgeMode::Clamp), 0.5);
         assert!((chain.sample(uv, 0.5, EdgeMode::Clamp) - 0.25).abs() < 1e-6);
         assert_eq!(chain.sample(uv, 99.0, EdgeMode::Clamp), 0.5);
+    }
+
+    /// The sampling and the mip chain as they were written before [`Grid`] held them, to
+    /// compare bit for bit.
+    mod before {
+        use super::*;
+
+        pub fn bilinear(w: u32, h: u32, depth: &[f32], uv: Vec2, edges: EdgeMode) -> f32 {
+            let t = uv * Vec2::new(w as f32, h as f32) - 0.5;
+            let t = if t.is_finite() { t } else { Vec2::ZERO };
+            let f = Vec2::new(floor(t.x), floor(t.y));
+            let (fx, fy) = (t.x - f.x, t.y - f.y);
+            let (x0, y0) = (f.x as i64, f.y as i64);
+            if x0 >= 0 && y0 >= 0 && x0 < i64::from(w) - 1 && y0 < i64::from(h) - 1 {
+                let at = y0 as usize * w as usize + x0 as usize;
+                let (d00, d10) = (depth[at], depth[at + 1]);
+                let (d01, d11) = (depth[at + w as usize], depth[at + w as usize + 1]);
+                let top = d00 + (d10 - d00) * fx;
+                let bottom = d01 + (d11 - d01) * fx;
+                return top + (bottom - top) * fy;
+            }
+            let (xa, xb) = edges.resolve_pair(x0, w);
+            let (ya, yb) = edges.resolve_pair(y0, h);
+            let row = |y: u32| y as usize * w as usize;
+            let (d00, d10) = (depth[row(ya) + xa as usize], depth[row(ya) + xb as usize]);
+            let (d01, d11) = (depth[row(yb) + xa as usize], depth[row(yb) + xb as usize]);
+            let top = d00 + (d10 - d00) * fx;
+            let bottom = d01 + (d11 - d01) * fx;
+            top + (bottom - top) * fy
+        }
+
+        fn weights(n: u32, m: u32) -> Vec<Vec<(u32, f64)>> {
+            let ratio = f64::from(n) / f64::from(m);
+            (0..m)
+                .map(|o| {
+                    let (a, b) = (f64::from(o) * ratio, f64::from(o + 1) * ratio);
+                    let last = (b.ceil() as u32).min(n);
+                    (a.floor() as u32..last)
+                        .filter_map(|s| {
+                            let overlap = (b.min(f64::from(s + 1)) - a.max(f64::from(s))).max(0.0);
+                            (overlap > 0.0).then_some((s, overlap / ratio))
+                        })
+                        .collect()
+                })
+                .collect()
+        }
+
+        pub fn downsample(w: u32, h: u32, depth: &[f32]) -> (u32, u32, Vec<f32>) {
+            let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+            let (wx, wy) = (weights(w, nw), weights(h, nh));
+            let mut out = vec![0.0f32; nw as usize * nh as usize];
+            for (oy, row_weights) in wy.iter().enumerate() {
+                for (ox, col_weights) in wx.iter().enumerate() {
+                    let mut acc = 0.0f64;
+                    for &(sy, wyv) in row_weights {
+                        for &(sx, wxv) in col_weights {
+                            acc += f64::from(depth[sy as usize * w as usize + sx as usize]) * wyv * wxv;
+                        }
+                    }
+                    out[oy * nw as usize + ox] = (acc as f32).clamp(0.0, 1.0);
+                }
+            }
+            (nw, nh, out)
+        }
+    }
+
+    /// A field of irregular depths over the whole of `[0, 1]`, ends included.
+    fn irregular(w: u32, h: u32) -> HeightField {
+        HeightField::from_height_fn(w, h, |x, y| {
+            let k = (x.wrapping_mul(2_654_435_761) ^ y.wrapping_mul(40_503)).rotate_left(7);
+            if k % 11 == 0 { f32::from(k % 2 == 0) } else { (k % 10_007) as f32 / 10_006.0 }
+        })
+    }
+
+    #[test]
+    fn sampling_and_mips_match_the_former_per_type_code_bit_for_bit() {
+        let bits = |v: &[f32]| v.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        for (w, h) in [(1, 1), (1, 7), (6, 1), (2, 2), (7, 5), (16, 16), (33, 12), (77, 53)] {
+            let hf = irregular(w, h);
+            for edges in EdgeMode::ALL {
+                for k in 0..2000u32 {
+                    // UVs inside, on, and well beyond the tile, some far away.
+                    let u = (k.wrapping_mul(7919) % 4001) as f32 / 1000.0 - 1.5;
+                    let v = (k.wrapping_mul(104_729) % 3001) as f32 / 1000.0 - 1.0;
+                    let uv = if k % 97 == 0 { Vec2::new(u * 1e7, v) } else { Vec2::new(u, v) };
+                    let want = before::bilinear(w, h, hf.depths(), uv, edges);
+                    assert_eq!(hf.sample_bilinear(uv, edges).to_bits(), want.to_bits(), "{w}x{h} {edges:?} {uv}");
+                }
+            }
+            let chain = MipChain::new(hf.clone());
+            let (mut lw, mut lh, mut level) = (w, h, hf.depths().to_vec());
+            for k in 0..chain.len() {
+                let got = chain.level(k);
+                assert_eq!(
+                    (got.width(), got.height(), bits(got.depths())),
+                    (lw, lh, bits(&level)),
+                    "{w}x{h} level {k}"
+                );
+                (lw, lh, level) = before::downsample(lw, lh, &level);
+            }
+            assert_eq!((chain.level(chain.len() - 1).width(), chain.level(chain.len() - 1).height()), (1, 1));
+            let (dw, dh, d) = before::downsample(w, h, hf.depths());
+            let down = hf.downsample();
+            assert_eq!((down.width(), down.height(), bits(down.depths())), (dw, dh, bits(&d)), "{w}x{h}");
+        }
     }
 }

@@ -38,6 +38,7 @@ pub mod bake;
 pub mod compose;
 pub mod cone;
 pub mod demo;
+pub mod grid;
 pub mod heightfield;
 pub mod integrate;
 pub mod memory;

@@ -7,17 +7,27 @@ use std::sync::Arc;
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
+use crate::grid::Grid;
 use crate::heightfield::{EdgeMode, HeightField};
 use crate::mesh::Mesh;
 use crate::shadow::ShadowParams;
 use crate::trace::{Technique, TraceParams};
 
 /// An RGB texture in linear colour, sampled bilinearly over texel centres like a height field.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct Texture {
-    width: u32,
-    height: u32,
-    texels: Vec<Vec3>,
+    grid: Grid<Vec3>,
+}
+
+impl std::fmt::Debug for Texture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let g = &self.grid;
+        f.debug_struct("Texture")
+            .field("width", &g.width())
+            .field("height", &g.height())
+            .field("texels", &g.texels())
+            .finish()
+    }
 }
 
 /// sRGB-encoded value in `[0, 1]` to linear.
@@ -37,11 +47,7 @@ impl Texture {
     /// A texture from linear texels, row-major; `None` if the sizes disagree or a side is 0.
     #[must_use]
     pub fn new(width: u32, height: u32, texels: Vec<Vec3>) -> Option<Self> {
-        (width > 0 && height > 0 && texels.len() == width as usize * height as usize).then_some(Self {
-            width,
-            height,
-            texels,
-        })
+        Grid::new(width, height, texels).map(|grid| Self { grid })
     }
 
     /// A texture from sRGB8 pixels (`[r, g, b]` per texel), converted to linear.
@@ -56,71 +62,70 @@ impl Texture {
     /// A 1x1 texture of one colour.
     #[must_use]
     pub fn constant(c: Vec3) -> Self {
-        Self { width: 1, height: 1, texels: vec![c] }
+        Self { grid: Grid::from_checked(1, 1, vec![c]) }
     }
 
     /// Width in texels.
     #[must_use]
     pub fn width(&self) -> u32 {
-        self.width
+        self.grid.width()
     }
 
     /// Height in texels.
     #[must_use]
     pub fn height(&self) -> u32 {
-        self.height
+        self.grid.height()
     }
 
     /// The texels, row-major.
     #[must_use]
     pub fn texels(&self) -> &[Vec3] {
-        &self.texels
+        self.grid.texels()
     }
 
     /// Texel `(x, y)` with wrapping or clamping.
     #[inline]
     #[must_use]
     pub fn texel(&self, x: i64, y: i64, edges: EdgeMode) -> Vec3 {
-        let xi = edges.resolve(x, self.width) as usize;
-        let yi = edges.resolve(y, self.height) as usize;
-        self.texels[yi * self.width as usize + xi]
+        self.grid.at(x, y, edges)
     }
 
     /// Bilinear sample at `uv`.
     #[must_use]
     pub fn sample(&self, uv: Vec2, edges: EdgeMode) -> Vec3 {
-        bilinear_vec3(&self.texels, self.width, self.height, uv, edges)
+        bilinear_vec3(&self.grid, uv, edges)
     }
 
     /// The next mip level by a 2x2 box filter (sides halve, never below 1; odd sides fold the
     /// last texel in with its neighbour).
     #[must_use]
     pub fn downsample(&self) -> Self {
-        let (nw, nh) = ((self.width / 2).max(1), (self.height / 2).max(1));
-        let mut texels = Vec::with_capacity(nw as usize * nh as usize);
-        for y in 0..nh {
-            for x in 0..nw {
-                let (x0, y0) = (x * self.width / nw, y * self.height / nh);
-                let (x1, y1) = (((x + 1) * self.width / nw).max(x0 + 1), ((y + 1) * self.height / nh).max(y0 + 1));
-                let mut acc = Vec3::ZERO;
-                for yy in y0..y1 {
-                    for xx in x0..x1 {
-                        acc += self.texels[(yy * self.width + xx) as usize];
-                    }
-                }
-                texels.push(acc / ((x1 - x0) * (y1 - y0)) as f32);
-            }
-        }
-        Self { width: nw, height: nh, texels }
+        Self { grid: self.grid.downsample_box() }
+    }
+
+    /// This texture and its mip chain down to 1x1, each level the [`Texture::downsample`] of
+    /// the one before.
+    #[must_use]
+    pub fn mip_chain(self) -> Vec<Self> {
+        self.grid.mip_chain(Grid::downsample_box).into_iter().map(|grid| Self { grid }).collect()
     }
 }
 
 /// A tangent-space normal map (+Y up, pomkit's convention), unit vectors per texel.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct NormalMap {
-    width: u32,
-    height: u32,
-    normals: Vec<Vec3>,
+    grid: Grid<Vec3>,
+}
+
+impl std::fmt::Debug for NormalMap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let g = &self.grid;
+        f.debug_struct("NormalMap")
+            .field("width", &g.width())
+            .field("height", &g.height())
+            .field("normals", &g.texels())
+            .finish()
+    }
 }
 
 impl NormalMap {
@@ -132,63 +137,41 @@ impl NormalMap {
             return None;
         }
         let normals = normals.into_iter().map(|n| n.try_normalize().unwrap_or(Vec3::Z)).collect();
-        Some(Self { width, height, normals })
+        Some(Self { grid: Grid::from_checked(width, height, normals) })
     }
 
     /// Width in texels.
     #[must_use]
     pub fn width(&self) -> u32 {
-        self.width
+        self.grid.width()
     }
 
     /// Height in texels.
     #[must_use]
     pub fn height(&self) -> u32 {
-        self.height
+        self.grid.height()
     }
 
     /// The normals, row-major.
     #[must_use]
     pub fn normals(&self) -> &[Vec3] {
-        &self.normals
+        self.grid.texels()
     }
 
     /// Bilinear sample at `uv`, renormalized (as a shader does after filtering).
     #[must_use]
     pub fn sample(&self, uv: Vec2, edges: EdgeMode) -> Vec3 {
-        bilinear_vec3(&self.normals, self.width, self.height, uv, edges).try_normalize().unwrap_or(Vec3::Z)
+        bilinear_vec3(&self.grid, uv, edges).try_normalize().unwrap_or(Vec3::Z)
     }
 }
 
-/// Bilinear interpolation of a row-major grid of vectors over texel centres, as a GPU filters.
-fn bilinear_vec3(texels: &[Vec3], width: u32, height: u32, uv: Vec2, edges: EdgeMode) -> Vec3 {
-    if width == 1 && height == 1 {
-        // A constant (a material without an albedo map, the last mip): its one texel.
-        return texels[0];
+/// [`Grid::sample_bilinear`], except that a 1x1 grid (a material without an albedo map, the
+/// last mip) gives its one texel as it is: glam's `lerp` of a texel with itself may round.
+fn bilinear_vec3(grid: &Grid<Vec3>, uv: Vec2, edges: EdgeMode) -> Vec3 {
+    if grid.width() == 1 && grid.height() == 1 {
+        return grid.texels()[0];
     }
-    let t = uv * Vec2::new(width as f32, height as f32) - 0.5;
-    let t = if t.is_finite() { t } else { Vec2::ZERO };
-    let f = Vec2::new(crate::heightfield::floor(t.x), crate::heightfield::floor(t.y));
-    let (fx, fy) = (t.x - f.x, t.y - f.y);
-    let (x0, y0) = (f.x as i64, f.y as i64);
-    if x0 >= 0 && y0 >= 0 && x0 < i64::from(width) - 1 && y0 < i64::from(height) - 1 {
-        // Inside: the four texels without edge handling.
-        let at = y0 as usize * width as usize + x0 as usize;
-        let below = at + width as usize;
-        let top = texels[at].lerp(texels[at + 1], fx);
-        let bottom = texels[below].lerp(texels[below + 1], fx);
-        return top.lerp(bottom, fy);
-    }
-    let at = |x: i64, y: i64| {
-        let xi = edges.resolve(x, width) as usize;
-        let yi = edges.resolve(y, height) as usize;
-        texels[yi * width as usize + xi]
-    };
-    // `as` saturates far outside the i64 range; the neighbour saturates too rather than overflow.
-    let (x1, y1) = (x0.saturating_add(1), y0.saturating_add(1));
-    let top = at(x0, y0).lerp(at(x1, y0), fx);
-    let bottom = at(x0, y1).lerp(at(x1, y1), fx);
-    top.lerp(bottom, fy)
+    grid.sample_bilinear(uv, edges)
 }
 
 /// A perspective camera.
@@ -590,6 +573,107 @@ mod tests {
         let m = n.sample(Vec2::new(0.5, 0.5), EdgeMode::Clamp);
         assert!((m - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-6, "renormalized: {m}");
         assert_eq!(NormalMap::new(1, 1, vec![Vec3::ZERO]).unwrap().normals(), &[Vec3::Z]);
+    }
+
+    /// Texture and normal map sampling and the texture mip chain as they were written before
+    /// [`Grid`] held them, to compare bit for bit.
+    mod before {
+        use super::*;
+
+        pub fn bilinear_vec3(texels: &[Vec3], width: u32, height: u32, uv: Vec2, edges: EdgeMode) -> Vec3 {
+            if width == 1 && height == 1 {
+                return texels[0];
+            }
+            let t = uv * Vec2::new(width as f32, height as f32) - 0.5;
+            let t = if t.is_finite() { t } else { Vec2::ZERO };
+            let f = Vec2::new(crate::heightfield::floor(t.x), crate::heightfield::floor(t.y));
+            let (fx, fy) = (t.x - f.x, t.y - f.y);
+            let (x0, y0) = (f.x as i64, f.y as i64);
+            if x0 >= 0 && y0 >= 0 && x0 < i64::from(width) - 1 && y0 < i64::from(height) - 1 {
+                let at = y0 as usize * width as usize + x0 as usize;
+                let below = at + width as usize;
+                let top = texels[at].lerp(texels[at + 1], fx);
+                let bottom = texels[below].lerp(texels[below + 1], fx);
+                return top.lerp(bottom, fy);
+            }
+            let at = |x: i64, y: i64| {
+                let xi = edges.resolve(x, width) as usize;
+                let yi = edges.resolve(y, height) as usize;
+                texels[yi * width as usize + xi]
+            };
+            let (x1, y1) = (x0.saturating_add(1), y0.saturating_add(1));
+            let top = at(x0, y0).lerp(at(x1, y0), fx);
+            let bottom = at(x0, y1).lerp(at(x1, y1), fx);
+            top.lerp(bottom, fy)
+        }
+
+        pub fn downsample(width: u32, height: u32, texels: &[Vec3]) -> (u32, u32, Vec<Vec3>) {
+            let (nw, nh) = ((width / 2).max(1), (height / 2).max(1));
+            let mut out = Vec::with_capacity(nw as usize * nh as usize);
+            for y in 0..nh {
+                for x in 0..nw {
+                    let (x0, y0) = (x * width / nw, y * height / nh);
+                    let (x1, y1) = (((x + 1) * width / nw).max(x0 + 1), ((y + 1) * height / nh).max(y0 + 1));
+                    let mut acc = Vec3::ZERO;
+                    for yy in y0..y1 {
+                        for xx in x0..x1 {
+                            acc += texels[(yy * width + xx) as usize];
+                        }
+                    }
+                    out.push(acc / ((x1 - x0) * (y1 - y0)) as f32);
+                }
+            }
+            (nw, nh, out)
+        }
+
+        /// pomkit-cpu's albedo chain: the texture, then downsampled until 1x1.
+        pub fn mip_chain(width: u32, height: u32, texels: Vec<Vec3>) -> Vec<(u32, u32, Vec<Vec3>)> {
+            let mut chain = vec![(width, height, texels)];
+            while let Some(last) = chain.last().filter(|t| t.0 > 1 || t.1 > 1) {
+                let next = downsample(last.0, last.1, &last.2);
+                chain.push(next);
+            }
+            chain
+        }
+    }
+
+    fn irregular_vec3(w: u32, h: u32) -> Vec<Vec3> {
+        (0..w * h)
+            .map(|k| {
+                let r = k.wrapping_mul(2_654_435_761).rotate_left(9);
+                Vec3::new((r % 1009) as f32 / 1008.0, (r % 997) as f32 / 331.0 - 1.0, (r % 101) as f32 / 7.0 - 3.0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn textures_and_normal_maps_match_the_former_per_type_code_bit_for_bit() {
+        let bits = |v: &[Vec3]| v.iter().flat_map(|c| c.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+        for (w, h) in [(1, 1), (1, 7), (6, 1), (2, 2), (7, 5), (16, 16), (33, 12), (67, 45)] {
+            let texels = irregular_vec3(w, h);
+            let t = Texture::new(w, h, texels.clone()).unwrap();
+            let n = NormalMap::new(w, h, texels.clone()).unwrap();
+            for edges in EdgeMode::ALL {
+                for k in 0..1000u32 {
+                    let u = (k.wrapping_mul(7919) % 4001) as f32 / 1000.0 - 1.5;
+                    let v = (k.wrapping_mul(104_729) % 3001) as f32 / 1000.0 - 1.0;
+                    let uv = if k % 97 == 0 { Vec2::new(u, v * 1e7) } else { Vec2::new(u, v) };
+                    let want = before::bilinear_vec3(&texels, w, h, uv, edges);
+                    assert_eq!(bits(&[t.sample(uv, edges)]), bits(&[want]), "{w}x{h} {edges:?} {uv}");
+                    let want = before::bilinear_vec3(n.normals(), w, h, uv, edges).try_normalize().unwrap_or(Vec3::Z);
+                    assert_eq!(bits(&[n.sample(uv, edges)]), bits(&[want]), "{w}x{h} {edges:?} {uv}");
+                }
+            }
+            let (dw, dh, d) = before::downsample(w, h, &texels);
+            let down = t.downsample();
+            assert_eq!((down.width(), down.height(), bits(down.texels())), (dw, dh, bits(&d)), "{w}x{h}");
+            let chain = t.mip_chain();
+            let want = before::mip_chain(w, h, texels);
+            assert_eq!(chain.len(), want.len(), "{w}x{h}");
+            for (k, (got, want)) in chain.iter().zip(&want).enumerate() {
+                assert_eq!((got.width(), got.height(), bits(got.texels())), (want.0, want.1, bits(&want.2)), "{k}");
+            }
+        }
     }
 
     fn plane_scene(camera: Camera, size: f32) -> Scene {
