@@ -431,56 +431,82 @@ impl ScreenTriangle {
     pub fn rasterize_into(&self, x0: u32, y0: u32, x1: u32, y1: u32, sink: &mut impl FragmentSink) {
         let Some((bx0, by0, bx1, by1)) = self.quad_bounds(x0, y0, x1, y1) else { return };
         let inside = |x: u32, y: u32| x >= x0 && x < x1 && y >= y0 && y < y1;
-        let (qx0, qy0) = (bx0 & !1, by0 & !1);
+        // The quads start on even pixels.
+        let quads = [bx0 & !1, by0 & !1, bx1, by1];
         if self.small {
-            // The edge functions stepped from pixel to pixel, exactly (in i64: the values at
-            // pixel centres stay below 2^60, module docs of `SMALL`), and the top-left rule as
-            // a least value: covered where every edge function is at least `least`.
-            let [a, b, c] = self.fixed;
-            let o = Self::centre(qx0, qy0);
-            let mut row = [0i64; 3];
-            let mut step_x = [0i64; 3];
-            let mut step_y = [0i64; 3];
-            let mut least = [0i64; 3];
-            for (k, (p, q)) in [(b, c), (c, a), (a, b)].into_iter().enumerate() {
-                let d = [q[0] - p[0], q[1] - p[1]];
-                row[k] = d[0] * (o[1] - p[1]) - d[1] * (o[0] - p[0]);
-                step_x[k] = -d[1] * 256;
-                step_y[k] = d[0] * 256;
-                least[k] = i64::from(!is_top_left(p, q));
-            }
-            let mut qy = qy0;
-            while qy < by1 {
-                let mut e = row;
-                let mut qx = qx0;
-                while qx < bx1 {
-                    let mut w = [[0i64; 3]; 4];
-                    let mut mask = 0u32;
-                    for (k, wk) in w.iter_mut().enumerate() {
-                        let (dx, dy) = ((k & 1) as i64, (k >> 1) as i64);
-                        let mut all = true;
-                        for i in 0..3 {
-                            wk[i] = e[i] + dx * step_x[i] + dy * step_y[i];
-                            all &= wk[i] >= least[i];
-                        }
-                        mask |= u32::from(all) << k;
-                    }
-                    if mask != 0 {
-                        let w = w.map(|wk| wk.map(|v| v as f64));
-                        self.emit_quad(qx, qy, mask, &w, inside, sink);
-                    }
+            self.rasterize_stepped(quads, inside, sink);
+        } else {
+            self.rasterize_exact(quads, inside, sink);
+        }
+    }
+
+    /// [`ScreenTriangle::rasterize_into`] for a [`SMALL`] triangle, over the quads from
+    /// `(qx0, qy0)` (even) to `(bx1, by1)`: the edge functions stepped from pixel to pixel,
+    /// exactly (in i64: the values at pixel centres stay below 2^60, module docs of `SMALL`),
+    /// and the top-left rule as a least value: covered where every edge function is at least
+    /// `least`.
+    #[inline(always)]
+    fn rasterize_stepped(
+        &self,
+        [qx0, qy0, bx1, by1]: [u32; 4],
+        inside: impl Fn(u32, u32) -> bool + Copy,
+        sink: &mut impl FragmentSink,
+    ) {
+        let [a, b, c] = self.fixed;
+        let o = Self::centre(qx0, qy0);
+        let mut row = [0i64; 3];
+        let mut step_x = [0i64; 3];
+        let mut step_y = [0i64; 3];
+        let mut least = [0i64; 3];
+        for (k, (p, q)) in [(b, c), (c, a), (a, b)].into_iter().enumerate() {
+            let d = [q[0] - p[0], q[1] - p[1]];
+            row[k] = d[0] * (o[1] - p[1]) - d[1] * (o[0] - p[0]);
+            step_x[k] = -d[1] * 256;
+            step_y[k] = d[0] * 256;
+            least[k] = i64::from(!is_top_left(p, q));
+        }
+        let mut qy = qy0;
+        while qy < by1 {
+            let mut e = row;
+            let mut qx = qx0;
+            while qx < bx1 {
+                let mut w = [[0i64; 3]; 4];
+                let mut mask = 0u32;
+                for (k, wk) in w.iter_mut().enumerate() {
+                    let (dx, dy) = ((k & 1) as i64, (k >> 1) as i64);
+                    let mut all = true;
                     for i in 0..3 {
-                        e[i] += 2 * step_x[i];
+                        wk[i] = e[i] + dx * step_x[i] + dy * step_y[i];
+                        all &= wk[i] >= least[i];
                     }
-                    qx += 2;
+                    mask |= u32::from(all) << k;
+                }
+                if mask != 0 {
+                    let w = w.map(|wk| wk.map(|v| v as f64));
+                    self.emit_quad(qx, qy, mask, &w, inside, sink);
                 }
                 for i in 0..3 {
-                    row[i] += 2 * step_y[i];
+                    e[i] += 2 * step_x[i];
                 }
-                qy += 2;
+                qx += 2;
             }
-            return;
+            for i in 0..3 {
+                row[i] += 2 * step_y[i];
+            }
+            qy += 2;
         }
+    }
+
+    /// [`ScreenTriangle::rasterize_into`] for any triangle, over the quads from `(qx0, qy0)`
+    /// (even) to `(bx1, by1)`: the edge functions evaluated at each pixel centre
+    /// ([`ScreenTriangle::edges_at`]).
+    #[inline(always)]
+    fn rasterize_exact(
+        &self,
+        [qx0, qy0, bx1, by1]: [u32; 4],
+        inside: impl Fn(u32, u32) -> bool + Copy,
+        sink: &mut impl FragmentSink,
+    ) {
         let mut qy = qy0;
         while qy < by1 {
             let mut qx = qx0;
