@@ -97,12 +97,12 @@ const HEIGHT_BYTES_PER_TEXEL: u64 = 80;
 /// Bytes per albedo texel: the texture and its mip chain (4/3 of it) of linear RGB.
 const ALBEDO_BYTES_PER_TEXEL: u64 = 16;
 
-/// An upper bound on the memory [`CpuRenderer::render`] allocates for `scene` with `opts`
-/// (beyond the scene itself), by part: the output frame (colour, AOVs, and an 8-bit copy for
-/// the PNG), the sample bands in flight, the triangle list and its tile bins, the largest
-/// object's vertex stage (its world-space copy and clip-space vertices), the displaced
-/// reference's blocks (streamed: the subdivided triangles themselves are never held), and the
-/// prepared materials (surfaces, normal maps, albedo mips).
+/// An upper bound on the memory [`CpuRenderer::render`](crate::CpuRenderer::render)
+/// allocates for `scene` with `opts` (beyond the scene itself), by part: the output frame
+/// (colour, AOVs, and an 8-bit copy for the PNG), the sample bands in flight, the triangle list
+/// and its tile bins, the largest object's vertex stage (its world-space copy and clip-space
+/// vertices), the displaced reference's blocks (streamed: the subdivided triangles themselves
+/// are never held), and the prepared materials (surfaces, normal maps, albedo mips).
 #[must_use]
 pub fn estimate(scene: &Scene, opts: &RenderOptions) -> Estimate {
     let any_streamed =

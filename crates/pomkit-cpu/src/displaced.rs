@@ -85,9 +85,9 @@ impl<'a> DisplacedGeometry<'a> {
         Self { objects, view }
     }
 
-    /// Makes block `b` of displaced object `o` and runs the vertex stage on it. For displaced geometry
-    /// the normals are the undisplaced surface's (`Mesh::displaced_for_shading`): the normal
-    /// map adds the bumps, as for every parallax technique.
+    /// Makes block `b` of displaced object `o` and runs the vertex stage on it. For displaced
+    /// geometry the normals are the undisplaced surface's (`Mesh::displaced_for_shading`): the
+    /// normal map adds the bumps, as for every parallax technique.
     pub(crate) fn make_block(&self, o: usize, b: usize, out: &mut BlockVertices) {
         self.objects[o].blocks.block(b, &mut out.block);
         let blk = &out.block;
@@ -114,9 +114,9 @@ impl<'a> DisplacedGeometry<'a> {
         }
     }
 
-    /// The samples block `b` of displaced object `o` may cover, `(x0, y0, x1, y1)` (end exclusive), and
-    /// its least depth; `None` when it covers none (off screen, behind the camera, or facing
-    /// away).
+    /// The samples block `b` of displaced object `o` may cover, `(x0, y0, x1, y1)` (end
+    /// exclusive), and its least depth; `None` when it covers none (off screen, behind the
+    /// camera, or facing away).
     pub(crate) fn block_samples(
         &self,
         o: usize,

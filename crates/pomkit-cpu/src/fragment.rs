@@ -21,7 +21,8 @@ use crate::raster::Fragment;
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Shading {
     pub(crate) level: Level,
-    /// Packets of eight fragments, or one fragment at a time ([`Simd8::unpacked`](crate::Simd8::unpacked)).
+    /// Packets of eight fragments, or one fragment at a time
+    /// ([`Simd8::unpacked`](crate::Simd8::unpacked)).
     pub(crate) packets: bool,
     /// Every fragment's depth is its polygon's and none is discarded (no pixel depth offset, no
     /// silhouettes): each tile finds its visible fragments first and shades only those.
@@ -68,9 +69,10 @@ fn begin(scene: &Scene, prep: &Prepared, f: &Fragment, levels: (f32, f32)) -> La
 }
 
 /// [`begin`] into `lane`, from the fragment's unit normal `n` and eye direction `to_eye` (which
-/// a packet computes for all its lanes at once, [`shade_packet`](crate::packet::shade_packet)). It writes the lane field by
-/// field, where a packet keeps it: a whole `Lane` built aside and copied in cost a store
-/// forwarding stall per lane.
+/// a packet computes for all its lanes at once,
+/// [`shade_packet`](crate::packet::shade_packet)). It writes the lane field by field, where a
+/// packet keeps it: a whole `Lane` built aside and copied in cost a store forwarding stall per
+/// lane.
 #[inline(always)]
 pub(crate) fn begin_into(
     lane: &mut Lane,

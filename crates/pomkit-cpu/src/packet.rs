@@ -54,7 +54,8 @@ impl Packet {
     }
 
     /// Shades the packet's fragments ([`shade_packet`], or one at a time for
-    /// [`Simd8::unpacked`](crate::Simd8::unpacked)) and writes those nearer than what `buf` holds; empties the packet.
+    /// [`Simd8::unpacked`](crate::Simd8::unpacked)) and writes those nearer than what `buf`
+    /// holds; empties the packet.
     pub(crate) fn shade_into(&mut self, scene: &Scene, prep: &Prepared, shading: Shading, buf: &mut [Option<Sample>]) {
         if self.written == 0 {
             return;
@@ -208,9 +209,9 @@ fn trace_shadows<S: Simd>(
     }
 }
 
-/// [`finish`](crate::fragment::finish) for a packet of fragments (`lanes[i]` begun for every `frags[i]`), with the
-/// shadows already traced (`shadows[light][lane]`): the texture filtering and lighting run on
-/// all lanes at once ([`shade8`]), the pixel depth offset lane by lane.
+/// `fragment::finish` for a packet of fragments (`lanes[i]` begun for every `frags[i]`), with
+/// the shadows already traced (`shadows[light][lane]`): the texture filtering and lighting run
+/// on all lanes at once ([`shade8`]), the pixel depth offset lane by lane.
 #[expect(clippy::too_many_arguments, reason = "a packet's fragments, their state and the frame")]
 #[inline(always)]
 fn finish_packet<S: Simd>(

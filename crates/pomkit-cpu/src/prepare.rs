@@ -44,8 +44,8 @@ impl Prepared {
     }
 }
 
-/// Prepares every material (after [`validate`](crate::validate)): surfaces for tracing, normal maps (baked when
-/// absent), albedo mips.
+/// Prepares every material (after [`validate`](crate::validate)): surfaces for tracing, normal
+/// maps (baked when absent), albedo mips.
 pub(crate) fn prepare(scene: &Scene, opts: &RenderOptions, albedo: &[Arc<Vec<Texture>>]) -> Vec<Prepared> {
     scene
         .materials
