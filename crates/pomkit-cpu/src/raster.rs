@@ -119,7 +119,7 @@ pub fn clip_near(tri: [ClipVertex; 3]) -> Vec<[ClipVertex; 3]> {
     if !needs_clipping(&tri) {
         return vec![tri];
     }
-    if !tri.iter().any(|c| in_front(c.clip)) {
+    if !tri.iter().any(|c| is_in_front(c.clip)) {
         return vec![];
     }
     // Sutherland-Hodgman against z >= 0 (which implies w > 0 for a perspective projection),
@@ -158,7 +158,7 @@ pub fn clip_near(tri: [ClipVertex; 3]) -> Vec<[ClipVertex; 3]> {
 
 /// Whether a clip-space position lies in front of the near plane (and at a positive `w`).
 #[inline]
-fn in_front(c: Vec4) -> bool {
+fn is_in_front(c: Vec4) -> bool {
     c.z >= 0.0 && c.w > 1e-6
 }
 
@@ -173,7 +173,7 @@ pub fn needs_clipping(tri: &[ClipVertex; 3]) -> bool {
 /// band: a triangle needs clipping ([`needs_clipping`]) unless all three of its vertices do.
 pub fn unclipped(c: Vec4) -> bool {
     let g = GUARD_NDC * f64::from(c.w);
-    in_front(c) && f64::from(c.x).abs() <= g && f64::from(c.y).abs() <= g
+    is_in_front(c) && f64::from(c.x).abs() <= g && f64::from(c.y).abs() <= g
 }
 
 /// The point where edge `a`-`b` crosses the plane `dist = 0`, the same whichever way round the
@@ -316,9 +316,9 @@ impl ScreenTriangle {
 
     /// Whether edge functions `w` put their point inside (top-left rule).
     #[inline]
-    fn covered_by(&self, [w0, w1, w2]: [i128; 3]) -> bool {
+    fn covers(&self, [w0, w1, w2]: [i128; 3]) -> bool {
         let [a, b, c] = self.fixed;
-        edge_ok(w0, b, c) && edge_ok(w1, c, a) && edge_ok(w2, a, b)
+        is_inside_edge(w0, b, c) && is_inside_edge(w1, c, a) && is_inside_edge(w2, a, b)
     }
 
     /// The fixed-point centre of pixel `(x, y)`.
@@ -372,7 +372,7 @@ impl ScreenTriangle {
         let (pc, z) = self.weights_at(w.map(|v| v as f64));
         let mut v = Varyings::default();
         self.lerp_into(&mut v, pc);
-        (v, z, self.covered_by(w))
+        (v, z, self.covers(w))
     }
 
     /// The perspective-correct barycentric weights and the depth at the point of edge
@@ -431,56 +431,82 @@ impl ScreenTriangle {
     pub fn rasterize_into(&self, x0: u32, y0: u32, x1: u32, y1: u32, sink: &mut impl FragmentSink) {
         let Some((bx0, by0, bx1, by1)) = self.quad_bounds(x0, y0, x1, y1) else { return };
         let inside = |x: u32, y: u32| x >= x0 && x < x1 && y >= y0 && y < y1;
-        let (qx0, qy0) = (bx0 & !1, by0 & !1);
+        // The quads start on even pixels.
+        let quads = [bx0 & !1, by0 & !1, bx1, by1];
         if self.small {
-            // The edge functions stepped from pixel to pixel, exactly (in i64: the values at
-            // pixel centres stay below 2^60, module docs of `SMALL`), and the top-left rule as
-            // a least value: covered where every edge function is at least `least`.
-            let [a, b, c] = self.fixed;
-            let o = Self::centre(qx0, qy0);
-            let mut row = [0i64; 3];
-            let mut step_x = [0i64; 3];
-            let mut step_y = [0i64; 3];
-            let mut least = [0i64; 3];
-            for (k, (p, q)) in [(b, c), (c, a), (a, b)].into_iter().enumerate() {
-                let d = [q[0] - p[0], q[1] - p[1]];
-                row[k] = d[0] * (o[1] - p[1]) - d[1] * (o[0] - p[0]);
-                step_x[k] = -d[1] * 256;
-                step_y[k] = d[0] * 256;
-                least[k] = i64::from(!top_left(p, q));
-            }
-            let mut qy = qy0;
-            while qy < by1 {
-                let mut e = row;
-                let mut qx = qx0;
-                while qx < bx1 {
-                    let mut w = [[0i64; 3]; 4];
-                    let mut mask = 0u32;
-                    for (k, wk) in w.iter_mut().enumerate() {
-                        let (dx, dy) = ((k & 1) as i64, (k >> 1) as i64);
-                        let mut all = true;
-                        for i in 0..3 {
-                            wk[i] = e[i] + dx * step_x[i] + dy * step_y[i];
-                            all &= wk[i] >= least[i];
-                        }
-                        mask |= u32::from(all) << k;
-                    }
-                    if mask != 0 {
-                        let w = w.map(|wk| wk.map(|v| v as f64));
-                        self.emit_quad(qx, qy, mask, &w, inside, sink);
-                    }
+            self.rasterize_stepped(quads, inside, sink);
+        } else {
+            self.rasterize_exact(quads, inside, sink);
+        }
+    }
+
+    /// [`ScreenTriangle::rasterize_into`] for a [`SMALL`] triangle, over the quads from
+    /// `(qx0, qy0)` (even) to `(bx1, by1)`: the edge functions stepped from pixel to pixel,
+    /// exactly (in i64: the values at pixel centres stay below 2^60, module docs of `SMALL`),
+    /// and the top-left rule as a least value: covered where every edge function is at least
+    /// `least`.
+    #[inline(always)]
+    fn rasterize_stepped(
+        &self,
+        [qx0, qy0, bx1, by1]: [u32; 4],
+        inside: impl Fn(u32, u32) -> bool + Copy,
+        sink: &mut impl FragmentSink,
+    ) {
+        let [a, b, c] = self.fixed;
+        let o = Self::centre(qx0, qy0);
+        let mut row = [0i64; 3];
+        let mut step_x = [0i64; 3];
+        let mut step_y = [0i64; 3];
+        let mut least = [0i64; 3];
+        for (k, (p, q)) in [(b, c), (c, a), (a, b)].into_iter().enumerate() {
+            let d = [q[0] - p[0], q[1] - p[1]];
+            row[k] = d[0] * (o[1] - p[1]) - d[1] * (o[0] - p[0]);
+            step_x[k] = -d[1] * 256;
+            step_y[k] = d[0] * 256;
+            least[k] = i64::from(!is_top_left(p, q));
+        }
+        let mut qy = qy0;
+        while qy < by1 {
+            let mut e = row;
+            let mut qx = qx0;
+            while qx < bx1 {
+                let mut w = [[0i64; 3]; 4];
+                let mut mask = 0u32;
+                for (k, wk) in w.iter_mut().enumerate() {
+                    let (dx, dy) = ((k & 1) as i64, (k >> 1) as i64);
+                    let mut all = true;
                     for i in 0..3 {
-                        e[i] += 2 * step_x[i];
+                        wk[i] = e[i] + dx * step_x[i] + dy * step_y[i];
+                        all &= wk[i] >= least[i];
                     }
-                    qx += 2;
+                    mask |= u32::from(all) << k;
+                }
+                if mask != 0 {
+                    let w = w.map(|wk| wk.map(|v| v as f64));
+                    self.emit_quad(qx, qy, mask, &w, inside, sink);
                 }
                 for i in 0..3 {
-                    row[i] += 2 * step_y[i];
+                    e[i] += 2 * step_x[i];
                 }
-                qy += 2;
+                qx += 2;
             }
-            return;
+            for i in 0..3 {
+                row[i] += 2 * step_y[i];
+            }
+            qy += 2;
         }
+    }
+
+    /// [`ScreenTriangle::rasterize_into`] for any triangle, over the quads from `(qx0, qy0)`
+    /// (even) to `(bx1, by1)`: the edge functions evaluated at each pixel centre
+    /// ([`ScreenTriangle::edges_at`]).
+    #[inline(always)]
+    fn rasterize_exact(
+        &self,
+        [qx0, qy0, bx1, by1]: [u32; 4],
+        inside: impl Fn(u32, u32) -> bool + Copy,
+        sink: &mut impl FragmentSink,
+    ) {
         let mut qy = qy0;
         while qy < by1 {
             let mut qx = qx0;
@@ -493,7 +519,7 @@ impl ScreenTriangle {
                     let (x, y) = (qx + (k & 1) as u32, qy + (k >> 1) as u32);
                     let e = self.edges_at(Self::centre(x, y));
                     *wk = e.map(|v| v as f64);
-                    mask |= u32::from(self.covered_by(e)) << k;
+                    mask |= u32::from(self.covers(e)) << k;
                 }
                 if mask != 0 {
                     self.emit_quad(qx, qy, mask, &w, inside, sink);
@@ -561,7 +587,7 @@ pub trait FragmentSink {
 /// Whether the edge from `a` to `b` is a top or a left edge, whose pixel centres exactly on it
 /// belong to the triangle.
 #[inline]
-fn top_left(a: [i64; 2], b: [i64; 2]) -> bool {
+fn is_top_left(a: [i64; 2], b: [i64; 2]) -> bool {
     let d = [b[0] - a[0], b[1] - a[1]];
     // With positive area (counter-clockwise in y-down pixel space), top edges run toward -x
     // horizontally and left edges run toward +y.
@@ -571,8 +597,8 @@ fn top_left(a: [i64; 2], b: [i64; 2]) -> bool {
 /// Top-left rule: a pixel centre exactly on an edge belongs to the triangle only for top or
 /// left edges, so shared edges are drawn once.
 #[inline]
-fn edge_ok(w: i128, a: [i64; 2], b: [i64; 2]) -> bool {
-    if w != 0 { w > 0 } else { top_left(a, b) }
+fn is_inside_edge(w: i128, a: [i64; 2], b: [i64; 2]) -> bool {
+    if w != 0 { w > 0 } else { is_top_left(a, b) }
 }
 
 #[cfg(test)]

@@ -204,14 +204,14 @@ pub(crate) fn normal_map<S: Simd>(
 pub(crate) fn light_dirs<S: Simd>(simd: S, light: &Light, world: &[Vec3; LANES]) -> (V3<S>, V3<S>) {
     match *light {
         Light::Directional { .. } => {
-            let (l, radiance) = crate::light_at(light, Vec3::ZERO);
+            let (l, radiance) = crate::fragment::light_at(light, Vec3::ZERO);
             (V3::splat(simd, l), V3::splat(simd, radiance))
         }
         Light::Point { .. } => {
             let mut l = [Vec3::ZERO; LANES];
             let mut r = [Vec3::ZERO; LANES];
             for i in 0..LANES {
-                (l[i], r[i]) = crate::light_at(light, world[i]);
+                (l[i], r[i]) = crate::fragment::light_at(light, world[i]);
             }
             (V3::from_lanes(simd, &l), V3::from_lanes(simd, &r))
         }
@@ -237,7 +237,7 @@ pub(crate) struct LitInputs<'a, S: Simd> {
 pub(crate) fn lit<S: Simd>(
     simd: S,
     scene: &pomkit_core::scene::Scene,
-    prep: &crate::Prepared,
+    prep: &crate::prepare::Prepared,
     inputs: &LitInputs<'_, S>,
     uv: &[Vec2; LANES],
     with_shadows: [bool; LANES],
