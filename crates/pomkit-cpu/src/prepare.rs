@@ -55,7 +55,10 @@ pub(crate) fn prepare(scene: &Scene, opts: &RenderOptions, albedo: &[Arc<Vec<Tex
             let technique = opts.mode.technique(m.technique);
             let params = m.trace.sanitized();
             let (depth_scale, edges) = (sanitized_depth_scale(m.depth_scale), m.edges);
-            let lod_basis = m.height.as_ref().map(|f| (f.size_f32(), coarsest_level(f.width(), f.height())));
+            let lod_basis = m
+                .height
+                .as_ref()
+                .map(|f| (f.size_f32(), pomkit_core::grid::coarsest_level(f.width(), f.height()) as f32));
             // Without a displacing technique the surface is traced only by the displaced
             // reference's shadows (its fragments lie below the polygon); elsewhere every
             // fragment lies on the polygon, where nothing shadows it.
@@ -94,27 +97,6 @@ pub(crate) fn prepare(scene: &Scene, opts: &RenderOptions, albedo: &[Arc<Vec<Tex
         .collect()
 }
 
-/// The coarsest level of a `w x h` mip chain (sides halve, never below 1, down to 1 x 1), as
-/// [`pomkit_core::MipChain::max_level`] counts it.
-fn coarsest_level(mut w: u32, mut h: u32) -> f32 {
-    let mut k = 0u32;
-    while w > 1 || h > 1 {
-        (w, h) = ((w / 2).max(1), (h / 2).max(1));
-        k += 1;
-    }
-    k as f32
-}
-
-/// A texture and its mip chain down to 1 x 1.
-fn mip_chain(texture: Texture) -> Vec<Texture> {
-    let mut chain = vec![texture];
-    while let Some(last) = chain.last().filter(|t| t.width() > 1 || t.height() > 1) {
-        let next = last.downsample();
-        chain.push(next);
-    }
-    chain
-}
-
 /// The albedo mip chains of the frames so far, by texture: a texture is immutable once shared
 /// (`Arc<Texture>`), so its chain holds for as long as it lives. Height maps, which may change
 /// from frame to frame (dynamic height fields), are prepared anew every frame.
@@ -139,9 +121,9 @@ impl AlbedoCache {
             .zip(found)
             .map(|(m, found)| {
                 found.unwrap_or_else(|| {
-                    Arc::new(mip_chain(
-                        m.albedo.as_ref().map_or_else(|| Texture::constant(Vec3::ONE), |t| (**t).clone()),
-                    ))
+                    Arc::new(
+                        m.albedo.as_ref().map_or_else(|| Texture::constant(Vec3::ONE), |t| (**t).clone()).mip_chain(),
+                    )
                 })
             })
             .collect();
@@ -190,13 +172,5 @@ mod tests {
         assert_eq!(second, fresh(&scene));
         // The first textures are gone: so are their chains.
         assert_eq!(r.albedo.chains.len(), textured);
-    }
-
-    #[test]
-    fn the_coarsest_level_is_the_mip_chains() {
-        for (w, h) in [(1, 1), (2, 1), (512, 512), (640, 48), (3, 7), (1, 1000)] {
-            let chain = pomkit_core::MipChain::new(pomkit_core::HeightField::constant(w, h, 0.5));
-            assert_eq!(coarsest_level(w, h), chain.max_level(), "{w}x{h}");
-        }
     }
 }
