@@ -634,9 +634,7 @@ fn estimate(job: &Job, item: &Item) -> u64 {
         // The normals, then the RGBA texels and the encoder's copy.
         Kind::Pack => texels * 20,
         // The normals, the solve and the output (no height field: less its 8 bytes a texel).
-        Kind::Height { .. } => {
-            bake_height::bytes(&bake_height::options(job), w, h).saturating_sub(texels * 8)
-        }
+        Kind::Height { .. } => bake_height::bytes(&bake_height::options(job), w, h).saturating_sub(texels * 8),
     };
     decoded.saturating_add(texels * 8).saturating_add(map)
 }
@@ -774,7 +772,5 @@ fn names<T: ValueEnum>() -> Vec<String> {
 /// A config value that names one of `T`'s values (any case); `what` names the key in the error.
 fn choice<T: ValueEnum>(value: Option<&str>, what: impl Fn() -> String) -> Result<Option<T>> {
     let Some(s) = value else { return Ok(None) };
-    T::from_str(s, true)
-        .map(Some)
-        .map_err(|_| anyhow!("{}: '{s}' is not one of {}", what(), names::<T>().join(", ")))
+    T::from_str(s, true).map(Some).map_err(|_| anyhow!("{}: '{s}' is not one of {}", what(), names::<T>().join(", ")))
 }

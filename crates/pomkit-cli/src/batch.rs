@@ -122,4 +122,3 @@ impl Progress for Bar {
         self.0.finish_and_clear();
     }
 }
-

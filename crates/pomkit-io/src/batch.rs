@@ -593,8 +593,9 @@ enum Place {
 fn bake_one<B: Baker>(baker: &B, job: &B::Job, item: &Item, output: &Path) -> Status {
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> Result<Baked, String> {
         if let Some(parent) = output.parent() {
-            std::fs::create_dir_all(parent)
-                .map_err(|e| BatchError::context(format_args!("cannot create the folder {}", parent.display()), &e).0)?;
+            std::fs::create_dir_all(parent).map_err(|e| {
+                BatchError::context(format_args!("cannot create the folder {}", parent.display()), &e).0
+            })?;
         }
         baker.bake(job, &item.input, output)
     }));
