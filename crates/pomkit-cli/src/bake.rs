@@ -1,19 +1,22 @@
 //! `pomkit bake normal|parallax|pack|maxmip|cone`: maps baked from a height map; `bake height`
-//! (bake_height.rs): a height map integrated from a normal map.
+//! (bake_height.rs): a height map integrated from a normal map. A batch (several inputs, folders,
+//! globs) runs through [`pomkit_io::batch`], with the per-file options of a `--config` file
+//! ([`Rules`]) and the memory estimate of each file decided here.
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use pomkit_core::bake::{self, NormalBakeOptions, NormalFilter};
 use pomkit_core::cone::ConeMap;
 use pomkit_core::{EdgeMode, HeightField, MaxHeightPyramid};
+use pomkit_io::batch::{Baked, Baker, Item};
 use pomkit_io::output::{OutputId, Outputs};
 use pomkit_io::{PixelLayout, Pixels};
 
-use crate::bake_height::{HeightArgs, HeightReadEncoding, MethodArg};
+use crate::bake_height::{self, HeightArgs, HeightReadEncoding, MethodArg};
 use crate::batch::{self, BatchArgs};
-use crate::{HeightRead, progress};
+use crate::{ChannelArg, HeightRead, progress};
 
 #[derive(Subcommand, Debug)]
 pub enum BakeVerb {
@@ -241,26 +244,6 @@ pub(crate) enum Kind {
     },
 }
 
-/// What one bake made: the map's size and, for `bake height`, the relief the normals imply.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Baked {
-    /// Width in texels.
-    pub(crate) width: u32,
-    /// Height in texels.
-    pub(crate) height: u32,
-    /// `bake height`: the relief.
-    pub(crate) relief: Option<Relief>,
-}
-
-/// The relief integrated from a normal map.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Relief {
-    /// Height range in texel widths.
-    pub(crate) range: f32,
-    /// The range as a depth_scale (UV units: range / width).
-    pub(crate) depth_scale: f32,
-}
-
 impl Kind {
     /// The verb's name.
     pub(crate) fn verb(self) -> &'static str {
@@ -324,7 +307,7 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
             read: crate::HeightRead { depth_map: false, channel: crate::ChannelArg::Luma, normalize: false },
         };
         if batch::is_batch(&a.inputs, &a.batch) {
-            return batch::run(&job, &a.inputs, &a.batch, &a.output);
+            return run_batch(&job, &a.inputs, &a.batch, &a.output);
         }
         let baked = bake_file(&job, &a.inputs[0], &a.output, true)?;
         let (w, h) = (baked.width, baked.height);
@@ -383,7 +366,7 @@ pub fn run(verb: &BakeVerb) -> Result<()> {
         BakeVerb::Height(_) => unreachable!("handled above"),
     };
     if batch::is_batch(&inputs.inputs, &inputs.batch) {
-        return batch::run(&job, &inputs.inputs, &inputs.batch, output);
+        return run_batch(&job, &inputs.inputs, &inputs.batch, output);
     }
     let Baked { width: w, height: h, .. } = bake_file(&job, &inputs.inputs[0], output, true)?;
     match job.kind {
@@ -561,4 +544,233 @@ pub(crate) fn bake_file(job: &Job, input: &Path, output: &Path, bars: bool) -> R
     }
     outs.commit()?;
     Ok(Baked { width: w, height: h, relief: None })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Batches (pomkit_io::batch)
+// ---------------------------------------------------------------------------------------------
+
+/// Bakes a batch: `job` for every file, with the `--config` rules that match it applied.
+fn run_batch(job: &Job, inputs: &[PathBuf], args: &BatchArgs, out: &Path) -> Result<()> {
+    let template = batch::template(args, default_template(job.kind))?;
+    let rules = match &args.config {
+        Some(path) => Rules::load(path)?,
+        None => Rules::default(),
+    };
+    let baker = BatchBaker { job, rules };
+    batch::run(&baker, inputs, args, out, template, (job.kind.verb(), matches!(job.kind, Kind::Height { .. })))
+}
+
+/// What a batch bakes: the command line's job, with the config's rules.
+struct BatchBaker<'a> {
+    job: &'a Job,
+    rules: Rules,
+}
+
+impl Baker for BatchBaker<'_> {
+    type Job = Job;
+
+    fn job(&self, item: &Item) -> Job {
+        self.rules.apply(self.job, item)
+    }
+
+    fn extension(&self, job: &Job) -> &'static str {
+        job.kind.extension()
+    }
+
+    fn estimate(&self, job: &Job, item: &Item) -> u64 {
+        estimate(job, item)
+    }
+
+    fn describe(&self, item: &Item) -> String {
+        describe(item)
+    }
+
+    fn bake(&self, job: &Job, input: &Path, output: &Path) -> Result<Baked, String> {
+        bake_file(job, input, output, false).map_err(|e| format!("{e:#}"))
+    }
+}
+
+/// The output name of a batch's files when `--name` is not given.
+fn default_template(kind: Kind) -> &'static str {
+    match kind {
+        Kind::Normal(_) => "{stem}_normal.{ext}",
+        Kind::Parallax(_) => "{stem}_parallax.{ext}",
+        Kind::Pack => "{stem}_packed.{ext}",
+        Kind::Maxmip => "{stem}_maxmip.{ext}",
+        Kind::Cone { .. } => "{stem}_cone.{ext}",
+        Kind::Height { .. } => "{stem}_height.{ext}",
+    }
+}
+
+/// The width and height of an item's height map: a built-in's size, or an image file's header;
+/// `None` when it cannot be told before reading.
+fn dimensions(item: &Item) -> Option<(u32, u32, u64)> {
+    if item.input.to_str().is_some_and(|s| s.starts_with("builtin:")) {
+        let spec = item.input.to_str()?.strip_prefix("builtin:")?;
+        let size = spec.split_once(':').map_or("512x512", |(_, s)| s);
+        let (w, h) = crate::parse_size(size).ok()?;
+        return Some((w, h, 0));
+    }
+    pomkit_io::read::image_header(&item.input)
+}
+
+/// An upper bound of the bytes baking `item` as `kind` holds at its peak: the decoded image,
+/// the height field and its floats (8 bytes a texel, as reading a height map counts them), and
+/// what the map itself needs (`ConeMap::build_bytes` for cones; 12 bytes a texel for the
+/// maximum-height pyramid and its atlas, as `bake maxmip` checks; the texels and the encoder's
+/// copy of them for the others). A file whose size cannot be told from its header counts as
+/// its length.
+fn estimate(job: &Job, item: &Item) -> u64 {
+    let Some((w, h, decoded)) = dimensions(item) else { return item.bytes.unwrap_or(0) };
+    let kind = job.kind;
+    let texels = u64::from(w) * u64::from(h);
+    let map = match kind {
+        Kind::Cone { .. } => ConeMap::build_bytes(w, h),
+        Kind::Maxmip => texels * 12,
+        Kind::Normal(NormalEncoding::Float) => texels * 24,
+        Kind::Normal(_) | Kind::Parallax(ParallaxEncoding::R8) => texels * 6,
+        Kind::Parallax(ParallaxEncoding::Float) => texels * 8,
+        // The normals, then the RGBA texels and the encoder's copy.
+        Kind::Pack => texels * 20,
+        // The normals, the solve and the output (no height field: less its 8 bytes a texel).
+        Kind::Height { .. } => bake_height::bytes(&bake_height::options(job), w, h).saturating_sub(texels * 8),
+    };
+    decoded.saturating_add(texels * 8).saturating_add(map)
+}
+
+fn describe(item: &Item) -> String {
+    match dimensions(item) {
+        Some((w, h, _)) => format!("baking {} ({w}x{h})", item.input.display()),
+        None => format!("baking {}", item.input.display()),
+    }
+}
+
+/// One checked rule.
+struct Rule {
+    /// The file names it applies to (`match`).
+    pattern: Option<glob::Pattern>,
+    /// The folder it applies to.
+    folder: Option<PathBuf>,
+    scale: Option<f32>,
+    filter: Option<FilterArg>,
+    edges: Option<EdgesArg>,
+    y_down: Option<bool>,
+    depth_map: Option<bool>,
+    channel: Option<ChannelArg>,
+    normalize: Option<bool>,
+    /// An encoding of `bake normal` or `bake parallax` (the verbs that have one), applied to the
+    /// verb whose encoding it is.
+    encoding: Option<String>,
+}
+
+/// The rules of a `--config` file, in order.
+#[derive(Default)]
+struct Rules(Vec<Rule>);
+
+impl Rules {
+    fn load(path: &Path) -> Result<Self> {
+        let raw_rules = pomkit_io::batch_config::load_config(path)?;
+        let mut rules = Vec::with_capacity(raw_rules.len());
+        for (i, r) in raw_rules.into_iter().enumerate() {
+            let at = |key: &str| format!("config {}, [[rule]] {}, {key}", path.display(), i + 1);
+            let filter = choice::<FilterArg>(r.filter.as_deref(), || at("filter"))?;
+            let edges = choice::<EdgesArg>(r.edges.as_deref(), || at("edges"))?;
+            let channel = choice::<ChannelArg>(r.channel.as_deref(), || at("channel"))?;
+            // One config serves every verb: an encoding of any verb is accepted, and applied
+            // where it belongs.
+            let encoding = match r.encoding {
+                Some(e)
+                    if NormalEncoding::from_str(&e, true).is_err() && ParallaxEncoding::from_str(&e, true).is_err() =>
+                {
+                    let mut known = names::<NormalEncoding>();
+                    known.extend(names::<ParallaxEncoding>().into_iter().filter(|n| n != "float"));
+                    bail!(
+                        "{}: '{e}' is not one of {} (the encodings of bake normal and bake parallax)",
+                        at("encoding"),
+                        known.join(", ")
+                    );
+                }
+                e => e,
+            };
+            rules.push(Rule {
+                pattern: r.pattern,
+                folder: r.folder,
+                scale: r.scale,
+                filter,
+                edges,
+                y_down: r.y_down,
+                depth_map: r.depth_map,
+                channel,
+                normalize: r.normalize,
+                encoding,
+            });
+        }
+        Ok(Self(rules))
+    }
+
+    /// `job` with every rule that matches `item` applied, in order.
+    fn apply(&self, job: &Job, item: &Item) -> Job {
+        let mut job = job.clone();
+        for rule in &self.0 {
+            if !item.matches(rule.pattern.as_ref(), rule.folder.as_deref()) {
+                continue;
+            }
+            if let Some(v) = rule.scale {
+                job.slope.scale = v;
+            }
+            if let Some(v) = rule.filter {
+                job.slope.filter = v;
+            }
+            if let Some(v) = rule.edges {
+                job.slope.edges = v;
+            }
+            if let Some(v) = rule.y_down
+                && !matches!(job.kind, Kind::Parallax(_))
+            {
+                job.y_down = v;
+            }
+            if let Some(v) = rule.depth_map {
+                job.read.depth_map = v;
+            }
+            if let Some(v) = rule.channel {
+                job.read.channel = v;
+            }
+            if let Some(v) = rule.normalize {
+                job.read.normalize = v;
+            }
+            if let Some(e) = &rule.encoding {
+                match job.kind {
+                    Kind::Normal(_) => {
+                        if let Ok(v) = NormalEncoding::from_str(e, true) {
+                            job.kind = Kind::Normal(v);
+                        }
+                    }
+                    Kind::Parallax(_) => {
+                        if let Ok(v) = ParallaxEncoding::from_str(e, true) {
+                            job.kind = Kind::Parallax(v);
+                        }
+                    }
+                    Kind::Height { method, iterations, .. } => {
+                        if let Ok(v) = HeightReadEncoding::from_str(e, true) {
+                            job.kind = Kind::Height { encoding: v, method, iterations };
+                        }
+                    }
+                    Kind::Pack | Kind::Maxmip | Kind::Cone { .. } => {}
+                }
+            }
+        }
+        job
+    }
+}
+
+/// The names of `T`'s values.
+fn names<T: ValueEnum>() -> Vec<String> {
+    T::value_variants().iter().filter_map(ValueEnum::to_possible_value).map(|p| p.get_name().to_owned()).collect()
+}
+
+/// A config value that names one of `T`'s values (any case); `what` names the key in the error.
+fn choice<T: ValueEnum>(value: Option<&str>, what: impl Fn() -> String) -> Result<Option<T>> {
+    let Some(s) = value else { return Ok(None) };
+    T::from_str(s, true).map(Some).map_err(|_| anyhow!("{}: '{s}' is not one of {}", what(), names::<T>().join(", ")))
 }

@@ -1,16 +1,17 @@
 //! `pomkit bake height`: a height map integrated from a tangent-space normal map
-//! (pomkit-core's `integrate`), one file; batches go through batch.rs as the other bakes do.
+//! (pomkit-core's `integrate`), one file; batches go through bake.rs and `pomkit_io::batch` as the other bakes do.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use pomkit_core::integrate::{self, IntegrateMethod, IntegrateOptions};
+use pomkit_io::batch::{Baked, Relief};
 use pomkit_io::output::Outputs;
 use pomkit_io::scene::NormalZ;
 use pomkit_io::{PixelLayout, Pixels};
 
-use crate::bake::{Baked, EdgesArg, Job, Kind, Relief};
+use crate::bake::{EdgesArg, Job, Kind};
 use crate::batch::BatchArgs;
 use crate::progress;
 

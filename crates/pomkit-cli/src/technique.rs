@@ -1,5 +1,6 @@
-//! The technique options shared by `trace`, `compare` and (later) `render` (ARCHITECTURE.md, Stable interfaces),
-//! and the parsing of technique names.
+//! The technique options shared by `trace` and `compare` (ARCHITECTURE.md, Stable interfaces),
+//! and the parsing of technique names (`trace`, `compare`, `bench`). `render` parses its own
+//! `--technique` and `--compare`, which also accept `displaced` (render.rs).
 
 use anyhow::{Result, bail};
 use clap::Args;

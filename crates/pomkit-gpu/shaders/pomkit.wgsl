@@ -79,7 +79,8 @@ struct PomkitParams {
     samples: u32,
     /// Iterations of `iterative`.
     iterations: u32,
-    /// Binary-search steps of `relief`.
+    /// Binary-search steps of `relief`, and of `cone` after a relaxed cone's step went under the
+    /// surface.
     binary_steps: u32,
     /// Secant refinements of `pom`.
     refine: u32,

@@ -17,7 +17,11 @@ pub mod library;
 pub mod material;
 #[cfg(feature = "renderer")]
 pub mod pipeline;
+// Public for pomkit-gpu's own tests (tests/library_rays.rs, tests/analytic.rs: the shader
+// library against pomkit-core, ray by ray; docs/GPU.md), which are outside the crate and need a
+// public path to it. It is not part of the renderer's API, so it is hidden from the docs.
 #[cfg(feature = "renderer")]
+#[doc(hidden)]
 pub mod probe;
 #[cfg(feature = "renderer")]
 pub mod renderer;

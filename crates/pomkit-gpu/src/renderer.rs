@@ -64,11 +64,6 @@ impl GpuRenderer {
         &self.ctx
     }
 
-    /// The shader pipelines (for drawing into your own passes).
-    pub fn pipelines_mut(&mut self) -> &mut MaterialPipelines {
-        &mut self.pipelines
-    }
-
     /// Times of the last [`GpuRenderer::render`].
     #[must_use]
     pub fn timings(&self) -> Timings {
@@ -212,13 +207,141 @@ impl GpuRenderer {
         Ok(GpuScene { frame, materials, objects, dirty, width: w, height: h, ss, aovs: opts.aovs })
     }
 
+    /// Draws a prepared scene: the height maps that changed rebuilt, the render pass, the
+    /// pixels read back and resolved; the frame's times kept for [`GpuRenderer::timings`].
     fn draw_inner(&mut self, gs: &mut GpuScene, scene: &Scene) -> Result<RenderOutput, GpuRenderError> {
         let start = Instant::now();
         let ctx = &self.ctx;
-        let targets = Targets { color: COLOR, aovs: true, depth: DEPTH };
         let (w, h, ss) = (gs.width, gs.height, gs.ss);
-        let (sw, sh) = (w * ss, h * ss);
-        let (materials, objects) = (&gs.materials, &gs.objects);
+        let targets = FrameTargets::new(ctx, w * ss, h * ss);
+        let queries = ctx.timestamps.then(|| Timestamps::new(ctx));
+
+        let (compute_wall, has_compute) = self.rebuild_heights(gs, queries.as_ref())?;
+        let render_wall = self.render_pass(gs, &targets, queries.as_ref())?;
+        let mut timings = Timings { height_passes_ms: compute_wall, render_pass_ms: render_wall, ..Timings::default() };
+        if let Some(queries) = &queries {
+            queries.read(ctx, has_compute, &mut timings)?;
+        }
+
+        let samples = targets.read_samples(ctx)?;
+        timings.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        self.timings = timings;
+        Ok(resolve(&samples, w, h, ss, scene.background, gs.aovs).map_err(RenderError::from)?)
+    }
+
+    /// Rebuilds every height map that changed since the last draw, in one submission (its
+    /// first and last passes timed by `queries`). Returns the wall-clock milliseconds it took
+    /// and whether any map was rebuilt.
+    fn rebuild_heights(&self, gs: &mut GpuScene, queries: Option<&Timestamps>) -> Result<(f64, bool), GpuError> {
+        let ctx = &self.ctx;
+        ctx.wait()?;
+        let t_compute = Instant::now();
+        let mut enc =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pomkit heights") });
+        let mut first = true;
+        let materials = &gs.materials;
+        let rebuild = |i: usize| gs.dirty[i] && materials[i].height.is_some();
+        let last = (0..materials.len()).rev().find(|&i| rebuild(i));
+        for (i, m) in materials.iter().enumerate() {
+            if !rebuild(i) {
+                continue;
+            }
+            let (begin, end) = (first.then_some(0), (Some(i) == last).then_some(1));
+            let ts = queries.filter(|_| begin.is_some() || end.is_some()).map(|q| wgpu::ComputePassTimestampWrites {
+                query_set: &q.set,
+                beginning_of_pass_write_index: begin,
+                end_of_pass_write_index: end,
+            });
+            first = false;
+            m.encode_rebuild(&ctx.device, &self.pipelines, &mut enc, ts);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        gs.dirty.iter_mut().for_each(|d| *d = false);
+        Ok((t_compute.elapsed().as_secs_f64() * 1e3, last.is_some()))
+    }
+
+    /// Renders every object into `targets` (timed by `queries`, whose results are then copied
+    /// where [`Timestamps::read`] maps them). Returns the wall-clock milliseconds it took.
+    fn render_pass(
+        &self,
+        gs: &GpuScene,
+        targets: &FrameTargets,
+        queries: Option<&Timestamps>,
+    ) -> Result<f64, GpuError> {
+        let ctx = &self.ctx;
+        let t_render = Instant::now();
+        let mut enc =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pomkit render") });
+        {
+            let attachment = |view| {
+                Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })
+            };
+            let views = &targets.views;
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("pomkit scene"),
+                color_attachments: &[attachment(&views[0]), attachment(&views[1]), attachment(&views[2])],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &views[3],
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: queries.map(|q| wgpu::RenderPassTimestampWrites {
+                    query_set: &q.set,
+                    beginning_of_pass_write_index: Some(2),
+                    end_of_pass_write_index: Some(3),
+                }),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &gs.frame.bind_group, &[]);
+            let options = PipelineOptions::from(Targets { color: COLOR, aovs: true, depth: DEPTH });
+            for (mi, mesh, object) in &gs.objects {
+                let gm = &gs.materials[*mi];
+                let Some(pipeline) = self.pipelines.cached_variant(gm.technique, Variant::of(gm), &options) else {
+                    continue;
+                };
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(1, &gm.bind_group, &[]);
+                pass.set_bind_group(2, &object.bind_group, &[]);
+                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+            }
+        }
+        if let Some(q) = queries {
+            enc.resolve_query_set(&q.set, 0..4, &q.resolve, 0);
+            enc.copy_buffer_to_buffer(&q.resolve, 0, &q.read, 0, 32);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        Ok(t_render.elapsed().as_secs_f64() * 1e3)
+    }
+}
+
+/// A frame's render targets at the supersampled size: colour, the two AOV targets and depth.
+struct FrameTargets {
+    color: wgpu::Texture,
+    aov0: wgpu::Texture,
+    aov1: wgpu::Texture,
+    /// Kept with its view for the frame's length.
+    _depth: wgpu::Texture,
+    /// Views of the colour, AOV and depth targets, in that order.
+    views: Vec<wgpu::TextureView>,
+    /// Width and height in samples.
+    size: (u32, u32),
+}
+
+impl FrameTargets {
+    fn new(ctx: &GpuContext, sw: u32, sh: u32) -> Self {
         let make = |label: &str, format: wgpu::TextureFormat, usage: wgpu::TextureUsages| {
             ctx.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
@@ -238,128 +361,17 @@ impl GpuRenderer {
         let depth = make("pomkit depth", DEPTH, wgpu::TextureUsages::RENDER_ATTACHMENT);
         let views: Vec<wgpu::TextureView> =
             [&color, &aov0, &aov1, &depth].iter().map(|t| t.create_view(&Default::default())).collect();
+        Self { color, aov0, aov1, _depth: depth, views, size: (sw, sh) }
+    }
 
-        let queries = ctx.timestamps.then(|| {
-            let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("pomkit timestamps"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 4,
-            });
-            let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("pomkit timestamps"),
-                size: 32,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("pomkit timestamps read"),
-                size: 32,
-                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                mapped_at_creation: false,
-            });
-            (set, resolve, read)
-        });
-
-        // Compute: rebuild every height map.
-        ctx.wait()?;
-        let t_compute = Instant::now();
-        let mut enc =
-            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pomkit heights") });
-        let mut first = true;
-        let rebuild = |i: usize| gs.dirty[i] && materials[i].height.is_some();
-        let last = (0..materials.len()).rev().find(|&i| rebuild(i));
-        for (i, m) in materials.iter().enumerate() {
-            if !rebuild(i) {
-                continue;
-            }
-            let (begin, end) = (first.then_some(0), (Some(i) == last).then_some(1));
-            let ts = queries.as_ref().filter(|_| begin.is_some() || end.is_some()).map(|(set, _, _)| {
-                wgpu::ComputePassTimestampWrites {
-                    query_set: set,
-                    beginning_of_pass_write_index: begin,
-                    end_of_pass_write_index: end,
-                }
-            });
-            first = false;
-            m.encode_rebuild(&ctx.device, &self.pipelines, &mut enc, ts);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
-        gs.dirty.iter_mut().for_each(|d| *d = false);
-        let compute_wall = t_compute.elapsed().as_secs_f64() * 1e3;
-
-        // Render.
-        let t_render = Instant::now();
-        let mut enc =
-            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pomkit render") });
-        {
-            let attachment = |view| {
-                Some(wgpu::RenderPassColorAttachment {
-                    view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })
-            };
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("pomkit scene"),
-                color_attachments: &[attachment(&views[0]), attachment(&views[1]), attachment(&views[2])],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &views[3],
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: queries.as_ref().map(|(set, _, _)| wgpu::RenderPassTimestampWrites {
-                    query_set: set,
-                    beginning_of_pass_write_index: Some(2),
-                    end_of_pass_write_index: Some(3),
-                }),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_bind_group(0, &gs.frame.bind_group, &[]);
-            for (mi, mesh, object) in objects {
-                let gm = &materials[*mi];
-                let options = PipelineOptions::from(targets);
-                let Some(pipeline) = self.pipelines.cached_variant(gm.technique, Variant::of(gm), &options) else {
-                    continue;
-                };
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(1, &gm.bind_group, &[]);
-                pass.set_bind_group(2, &object.bind_group, &[]);
-                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
-            }
-        }
-        if let Some((set, resolve, read)) = &queries {
-            enc.resolve_query_set(set, 0..4, resolve, 0);
-            enc.copy_buffer_to_buffer(resolve, 0, read, 0, 32);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
-        let render_wall = t_render.elapsed().as_secs_f64() * 1e3;
-
-        let mut timings = Timings { height_passes_ms: compute_wall, render_pass_ms: render_wall, ..Timings::default() };
-        if let Some((_, _, read)) = &queries {
-            let bytes = ctx.read_buffer(read)?;
-            let stamp = |i: usize| u64::from_le_bytes(bytes[i * 8..i * 8 + 8].try_into().unwrap_or([0; 8]));
-            let period = f64::from(ctx.queue.get_timestamp_period()) * 1e-6;
-            let has_compute = last.is_some();
-            timings.height_passes_ms =
-                if has_compute { stamp(1).saturating_sub(stamp(0)) as f64 * period } else { 0.0 };
-            timings.render_pass_ms = stamp(3).saturating_sub(stamp(2)) as f64 * period;
-            timings.from_timestamps = true;
-        }
-
-        // Read back and resolve exactly as the CPU renderer does.
-        let c = ctx.read_texture(&color, 0)?;
-        let a0 = ctx.read_texture(&aov0, 0)?;
-        let a1 = ctx.read_texture(&aov1, 0)?;
-        let samples: Vec<Option<Sample>> = (0..(sw * sh) as usize)
+    /// Reads the targets back as the CPU renderer's samples (`None` where nothing was drawn),
+    /// to be resolved exactly as it resolves its own.
+    fn read_samples(&self, ctx: &GpuContext) -> Result<Vec<Option<Sample>>, GpuError> {
+        let c = ctx.read_texture(&self.color, 0)?;
+        let a0 = ctx.read_texture(&self.aov0, 0)?;
+        let a1 = ctx.read_texture(&self.aov1, 0)?;
+        let (sw, sh) = self.size;
+        Ok((0..(sw * sh) as usize)
             .map(|i| {
                 let k = i * 4;
                 (a1[k + 2] > 0.5).then(|| Sample {
@@ -372,10 +384,50 @@ impl GpuRenderer {
                     lod: a1[k + 1],
                 })
             })
-            .collect();
-        timings.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        self.timings = timings;
-        Ok(resolve(&samples, w, h, ss, scene.background, gs.aovs).map_err(RenderError::from)?)
+            .collect())
+    }
+}
+
+/// GPU timestamps of a frame (when the device has them): the height passes' start and end
+/// (queries 0 and 1) and the render pass's (2 and 3).
+struct Timestamps {
+    set: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    read: wgpu::Buffer,
+}
+
+impl Timestamps {
+    fn new(ctx: &GpuContext) -> Self {
+        let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("pomkit timestamps"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 4,
+        });
+        let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pomkit timestamps"),
+            size: 32,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pomkit timestamps read"),
+            size: 32,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        Self { set, resolve, read }
+    }
+
+    /// Replaces the wall-clock times of `timings` with the GPU's (the height passes' 0 when
+    /// none ran: `has_compute` false).
+    fn read(&self, ctx: &GpuContext, has_compute: bool, timings: &mut Timings) -> Result<(), GpuError> {
+        let bytes = ctx.read_buffer(&self.read)?;
+        let stamp = |i: usize| u64::from_le_bytes(bytes[i * 8..i * 8 + 8].try_into().unwrap_or([0; 8]));
+        let period = f64::from(ctx.queue.get_timestamp_period()) * 1e-6;
+        timings.height_passes_ms = if has_compute { stamp(1).saturating_sub(stamp(0)) as f64 * period } else { 0.0 };
+        timings.render_pass_ms = stamp(3).saturating_sub(stamp(2)) as f64 * period;
+        timings.from_timestamps = true;
+        Ok(())
     }
 }
 

@@ -28,7 +28,7 @@ fn every_wgsl_file_validates() {
         wgsl_files(&root.join(dir), &mut files);
     }
     assert!(
-        files.iter().any(|f| f.ends_with("pomkit-gpu/src/render.wgsl")),
+        files.iter().any(|f| f.ends_with("pomkit-gpu/src/material/render.wgsl")),
         "no shaders found under {} (found {files:?}): the test would prove nothing",
         root.display()
     );

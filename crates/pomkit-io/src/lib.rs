@@ -16,6 +16,7 @@ use image::{DynamicImage, ImageEncoder};
 use pomkit_core::cone::ConeMap;
 use pomkit_core::{EdgeMode, HeightField, HeightFieldError};
 
+pub mod batch;
 #[doc(hidden)]
 pub mod batch_config;
 mod float;

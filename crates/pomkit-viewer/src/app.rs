@@ -535,6 +535,8 @@ impl ViewerApp {
         }
     }
 
+    /// The 3D view: the picture (split when comparing), its mouse controls, and the figures and
+    /// messages drawn over it.
     fn view(&mut self, ui: &mut Ui) {
         let avail = ui.available_size();
         let (rect, response) = ui.allocate_exact_size(avail, egui::Sense::click_and_drag());
@@ -546,24 +548,51 @@ impl ViewerApp {
         let painter = ui.painter_at(rect);
         painter.rect_filled(rect, 0.0, Color32::from_rgb(12, 12, 14));
 
-        // Divider of the split view.
         let split_x = rect.left() + rect.width() * self.settings.split;
-        let divider = Rect::from_min_max(Pos2::new(split_x - 5.0, rect.top()), Pos2::new(split_x + 5.0, rect.bottom()));
-        let mut divider_dragged = false;
-        if self.settings.compare {
-            let d = ui.interact(divider, ui.scope_id().with("split"), egui::Sense::drag());
-            if d.dragged() {
-                self.settings.split =
-                    ((d.interact_pointer_pos().map_or(split_x, |p| p.x) - rect.left()) / rect.width()).clamp(0.0, 1.0);
-                divider_dragged = true;
-            }
-            if d.hovered() || d.dragged() {
-                ui.ctx().set_cursor_icon(egui::CursorIcon::ResizeHorizontal);
-            }
-        }
+        let divider_dragged = self.drag_divider(ui, rect, split_x);
+        let moved = self.camera_and_light_input(ui, &response, rect, divider_dragged);
+        let interacting = divider_dragged || moved || ui.ctx().dragged_id().is_some();
+        self.request(size_px, interacting);
 
-        // Camera and light.
-        let mut interacting = divider_dragged;
+        self.paint_picture(&painter, rect, split_x);
+        self.paint_figures(&painter, rect);
+        if ui.input(|i| !i.raw.hovered_files.is_empty()) {
+            paint_drop_hint(&painter, rect);
+        }
+    }
+
+    /// The divider of the split view at `split_x`, when comparing: dragging it moves the split.
+    /// Returns whether it is being dragged.
+    fn drag_divider(&mut self, ui: &Ui, rect: Rect, split_x: f32) -> bool {
+        if !self.settings.compare {
+            return false;
+        }
+        let divider = Rect::from_min_max(Pos2::new(split_x - 5.0, rect.top()), Pos2::new(split_x + 5.0, rect.bottom()));
+        let mut dragged = false;
+        let d = ui.interact(divider, ui.scope_id().with("split"), egui::Sense::drag());
+        if d.dragged() {
+            self.settings.split =
+                ((d.interact_pointer_pos().map_or(split_x, |p| p.x) - rect.left()) / rect.width()).clamp(0.0, 1.0);
+            dragged = true;
+        }
+        if d.hovered() || d.dragged() {
+            ui.ctx().set_cursor_icon(egui::CursorIcon::ResizeHorizontal);
+        }
+        dragged
+    }
+
+    /// The view's mouse controls (`response` is the view's): a drag orbits the camera, pans it
+    /// with the right or middle button or Shift, or moves the light with Ctrl (not while the
+    /// divider is dragged); the wheel zooms; a double click restores the default framing.
+    /// Returns whether the camera or the light moved.
+    fn camera_and_light_input(
+        &mut self,
+        ui: &Ui,
+        response: &egui::Response,
+        rect: Rect,
+        divider_dragged: bool,
+    ) -> bool {
+        let mut moved = false;
         if !divider_dragged && response.dragged() {
             let delta = response.drag_delta();
             let (mods, secondary) = ui.input(|i| (i.modifiers, i.pointer.secondary_down() || i.pointer.middle_down()));
@@ -579,7 +608,7 @@ impl ViewerApp {
                 c.orbit(pomkit_core::glam::Vec2::new(delta.x, delta.y));
                 self.set_camera(c);
             }
-            interacting = true;
+            moved = true;
         }
         if response.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y + i.zoom_delta().ln() * 200.0);
@@ -587,7 +616,7 @@ impl ViewerApp {
                 let mut c = self.camera();
                 c.zoom((-scroll * 0.002).exp());
                 self.set_camera(c);
-                interacting = true;
+                moved = true;
             }
         }
         if response.double_clicked() {
@@ -595,10 +624,12 @@ impl ViewerApp {
             let (eye, target) = SceneDoc::default().camera();
             self.doc.set_camera(eye, target);
         }
-        let interacting = interacting || ui.ctx().dragged_id().is_some();
-        self.request(size_px, interacting);
+        moved
+    }
 
-        // The picture.
+    /// The rendered picture: one texture over the whole view, or, comparing, the left part of
+    /// the first and the right part of the second with a line between them at `split_x`.
+    fn paint_picture(&self, painter: &egui::Painter, rect: Rect, split_x: f32) {
         let uv_full = Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0));
         if let Some(tex) = self.textures.first() {
             if self.textures.len() > 1 {
@@ -622,8 +653,11 @@ impl ViewerApp {
                 egui::Stroke::new(2.0, Color32::WHITE),
             );
         }
+    }
 
-        // Figures.
+    /// The figures over the picture: each side's frame time and fetches in the top corners,
+    /// the render's state (preview, rendering) in the bottom right, and the last error.
+    fn paint_figures(&self, painter: &egui::Painter, rect: Rect) {
         let font = egui::FontId::monospace(13.0);
         let shadowed = |pos: Pos2, anchor: egui::Align2, text: String| {
             painter.text(pos + Vec2::splat(1.0), anchor, &text, font.clone(), Color32::BLACK);
@@ -659,16 +693,6 @@ impl ViewerApp {
                 e,
                 egui::FontId::proportional(15.0),
                 Color32::LIGHT_RED,
-            );
-        }
-        if ui.input(|i| !i.raw.hovered_files.is_empty()) {
-            painter.rect_filled(rect, 0.0, Color32::from_black_alpha(140));
-            painter.text(
-                rect.center(),
-                egui::Align2::CENTER_CENTER,
-                "Drop: .toml opens a scene, .obj/.gltf/.glb sets the mesh,\nimages go to the map slot under the pointer (else by file name)",
-                egui::FontId::proportional(16.0),
-                Color32::WHITE,
             );
         }
     }
@@ -755,6 +779,18 @@ impl eframe::App for ViewerApp {
     fn persist_egui_memory(&self) -> bool {
         self.persist
     }
+}
+
+/// The hint shown while files are dragged over the window: what dropping them does.
+fn paint_drop_hint(painter: &egui::Painter, rect: Rect) {
+    painter.rect_filled(rect, 0.0, Color32::from_black_alpha(140));
+    painter.text(
+        rect.center(),
+        egui::Align2::CENTER_CENTER,
+        "Drop: .toml opens a scene, .obj/.gltf/.glb sets the mesh,\nimages go to the map slot under the pointer (else by file name)",
+        egui::FontId::proportional(16.0),
+        Color32::WHITE,
+    );
 }
 
 #[cfg(test)]

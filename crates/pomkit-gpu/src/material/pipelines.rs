@@ -21,7 +21,7 @@ pub struct Targets {
 pub const AOV_FORMATS: [wgpu::TextureFormat; 2] = [wgpu::TextureFormat::Rgba32Float, wgpu::TextureFormat::Rgba16Float];
 
 /// pomkit's own material shader; the library is composed in front of it.
-pub const RENDER_WGSL: &str = include_str!("../render.wgsl");
+pub const RENDER_WGSL: &str = include_str!("render.wgsl");
 
 /// Vertex layout: position, normal, tangent (xyz, w handedness), uv, uv scale, depth,
 /// curvature.
