@@ -7,15 +7,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, Subcommand, ValueEnum};
-use pomkit_core::bake::{self, NormalBakeOptions, NormalFilter};
+use pomkit_core::bake::{self, NormalBakeOptions};
 use pomkit_core::cone::ConeMap;
-use pomkit_core::{EdgeMode, HeightField, MaxHeightPyramid};
+use pomkit_core::{HeightField, MaxHeightPyramid};
+use pomkit_io::Pixels;
 use pomkit_io::batch::{Baked, Baker, Item};
 use pomkit_io::output::{OutputId, Outputs};
-use pomkit_io::{PixelLayout, Pixels};
 
-use crate::bake_height::{self, HeightArgs, HeightReadEncoding, MethodArg};
+use crate::bake_height::{self, HeightArgs};
 use crate::batch::{self, BatchArgs};
+use crate::job::{EdgesArg, FilterArg, HeightReadEncoding, Job, Kind, NormalEncoding, ParallaxEncoding, SlopeArgs};
 use crate::{ChannelArg, HeightRead, progress};
 
 #[derive(Subcommand, Debug)]
@@ -57,57 +58,6 @@ pub struct BakeInputs {
     pub(crate) batch: BatchArgs,
 }
 
-/// Options shared by every map derived from slopes.
-#[derive(Args, Debug, Clone)]
-pub struct SlopeArgs {
-    /// Lengyel's s: the full height range spans this many texel widths. Larger is steeper; 0
-    /// gives flat normals (every texel +Z); a negative scale inverts the relief (reads the map
-    /// as depth). At most 1e18 in magnitude, beyond which the normals overflow f32.
-    #[arg(long, default_value_t = 8.0, allow_negative_numbers = true)]
-    pub(crate) scale: f32,
-    /// Slope filter: central differences (sharp) or the 3x3 Sobel operator (smoother).
-    #[arg(long, value_enum, default_value_t = FilterArg::Central)]
-    pub(crate) filter: FilterArg,
-    /// Border texels: wrap (tiling textures) or clamp.
-    #[arg(long, value_enum, default_value_t = EdgesArg::Wrap)]
-    pub(crate) edges: EdgesArg,
-}
-
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FilterArg {
-    Central,
-    Sobel,
-}
-
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum EdgesArg {
-    Wrap,
-    Clamp,
-}
-
-impl From<EdgesArg> for EdgeMode {
-    fn from(e: EdgesArg) -> Self {
-        match e {
-            EdgesArg::Wrap => EdgeMode::Wrap,
-            EdgesArg::Clamp => EdgeMode::Clamp,
-        }
-    }
-}
-
-impl SlopeArgs {
-    fn options(&self, y_down: bool) -> NormalBakeOptions {
-        NormalBakeOptions {
-            scale: self.scale,
-            filter: match self.filter {
-                FilterArg::Central => NormalFilter::Central,
-                FilterArg::Sobel => NormalFilter::Sobel,
-            },
-            edges: self.edges.into(),
-            y_down,
-        }
-    }
-}
-
 #[derive(Args, Debug)]
 pub struct NormalArgs {
     #[command(flatten)]
@@ -126,13 +76,6 @@ pub struct NormalArgs {
     y_down: bool,
 }
 
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum NormalEncoding {
-    Rgb8,
-    Rg8,
-    Float,
-}
-
 #[derive(Args, Debug)]
 pub struct ParallaxArgs {
     #[command(flatten)]
@@ -146,12 +89,6 @@ pub struct ParallaxArgs {
     /// back as c * 2 - 1). float: 32-bit EXR holding v itself.
     #[arg(long, value_enum, default_value_t = ParallaxEncoding::R8)]
     encoding: ParallaxEncoding,
-}
-
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ParallaxEncoding {
-    R8,
-    Float,
 }
 
 #[derive(Args, Debug)]
@@ -200,101 +137,6 @@ impl MapArgs {
     /// The slope options a [`Job`] carries: only the edges matter to these maps.
     fn slope(&self) -> SlopeArgs {
         SlopeArgs { scale: 8.0, filter: FilterArg::Central, edges: self.edges }
-    }
-}
-
-/// What to bake from one height map: the verb and its per-file options (the command line's,
-/// or a batch config's overrides of them).
-#[derive(Clone, Debug)]
-pub(crate) struct Job {
-    /// Which map, in which encoding.
-    pub(crate) kind: Kind,
-    /// Slope scale, filter and edges.
-    pub(crate) slope: SlopeArgs,
-    /// Store +Y down (normal and pack).
-    pub(crate) y_down: bool,
-    /// How to read the height map.
-    pub(crate) read: HeightRead,
-}
-
-/// A bake verb and its encoding.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Kind {
-    /// `bake normal`.
-    Normal(NormalEncoding),
-    /// `bake parallax`.
-    Parallax(ParallaxEncoding),
-    /// `bake pack`.
-    Pack,
-    /// `bake maxmip`.
-    Maxmip,
-    /// `bake cone`, conservative or relaxed.
-    Cone {
-        /// Relaxed cones (`--relaxed`).
-        relaxed: bool,
-    },
-    /// `bake height`: how the normal map is read and integrated.
-    Height {
-        /// Where z comes from.
-        encoding: HeightReadEncoding,
-        /// The solve.
-        method: MethodArg,
-        /// The weighted solve's iteration bound.
-        iterations: u32,
-    },
-}
-
-impl Kind {
-    /// The verb's name.
-    pub(crate) fn verb(self) -> &'static str {
-        match self {
-            Kind::Normal(_) => "normal",
-            Kind::Parallax(_) => "parallax",
-            Kind::Pack => "pack",
-            Kind::Maxmip => "maxmip",
-            Kind::Cone { .. } => "cone",
-            Kind::Height { .. } => "height",
-        }
-    }
-
-    /// The pixel layout written.
-    pub(crate) fn layout(self) -> PixelLayout {
-        match self {
-            Kind::Normal(NormalEncoding::Rgb8 | NormalEncoding::Rg8) => PixelLayout::Rgb8,
-            Kind::Normal(NormalEncoding::Float) => PixelLayout::RgbF32,
-            Kind::Parallax(ParallaxEncoding::R8) => PixelLayout::Gray8,
-            Kind::Parallax(ParallaxEncoding::Float) => PixelLayout::GrayF32,
-            Kind::Pack => PixelLayout::Rgba8,
-            Kind::Maxmip => PixelLayout::Gray16,
-            Kind::Cone { .. } => PixelLayout::GrayAlpha16,
-            // A float EXR when the output's name asks for one (bake_height::layout_for).
-            Kind::Height { .. } => PixelLayout::Gray16,
-        }
-    }
-
-    /// What baking a `w` x `h` map makes, for messages, and an upper bound on the bytes it
-    /// allocates besides the height field: the output, the encoder's copy, and the pyramid or
-    /// the cones being built.
-    fn job(self, w: u32, h: u32) -> (String, u64) {
-        let n = u64::from(w) * u64::from(h);
-        match self {
-            Kind::Normal(NormalEncoding::Rgb8 | NormalEncoding::Rg8) => {
-                (format!("a normal map of a {w}x{h} map"), n * 6)
-            }
-            Kind::Normal(NormalEncoding::Float) => (format!("a float normal map of a {w}x{h} map"), n * 24),
-            Kind::Parallax(_) => (format!("a parallax map of a {w}x{h} map"), n * 9),
-            Kind::Pack => (format!("a packed map of a {w}x{h} map"), n * 8),
-            // The pyramid (4/3 of the texels in f32) and its atlas (1.5 times the texels in
-            // u16, and the encoder's copy).
-            Kind::Maxmip => (format!("the maximum-height pyramid of a {w}x{h} map"), n * 12),
-            Kind::Cone { .. } => (format!("the cone map of a {w}x{h} map"), ConeMap::build_bytes(w, h)),
-            Kind::Height { .. } => (format!("the heights of a {w}x{h} normal map"), n * 64),
-        }
-    }
-
-    /// The output file's extension.
-    pub(crate) fn extension(self) -> &'static str {
-        if self.layout().is_float() { "exr" } else { "png" }
     }
 }
 

@@ -4,15 +4,15 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, ValueEnum};
-use pomkit_core::integrate::{self, IntegrateMethod, IntegrateOptions};
+use clap::Args;
+use pomkit_core::integrate::{self, IntegrateOptions};
 use pomkit_io::batch::{Baked, Relief};
 use pomkit_io::output::Outputs;
 use pomkit_io::scene::NormalZ;
 use pomkit_io::{PixelLayout, Pixels};
 
-use crate::bake::{EdgesArg, Job, Kind};
 use crate::batch::BatchArgs;
+use crate::job::{EdgesArg, HeightReadEncoding, Job, Kind, MethodArg};
 use crate::progress;
 
 /// `pomkit bake height NORMAL -o HEIGHT`.
@@ -53,30 +53,6 @@ pub struct HeightArgs {
     #[arg(long, value_name = "N", default_value_t = integrate::DEFAULT_ITERATIONS,
           value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub(crate) iterations: u32,
-}
-
-/// Where z comes from (`--encoding`).
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum HeightReadEncoding {
-    Auto,
-    Rgb8,
-    Rg8,
-}
-
-/// `--method`.
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum MethodArg {
-    Poisson,
-    Weighted,
-}
-
-impl From<MethodArg> for IntegrateMethod {
-    fn from(m: MethodArg) -> Self {
-        match m {
-            MethodArg::Poisson => IntegrateMethod::Poisson,
-            MethodArg::Weighted => IntegrateMethod::Weighted,
-        }
-    }
 }
 
 /// The output's layout, by its extension: float EXR for `.exr`, else 16-bit PNG.

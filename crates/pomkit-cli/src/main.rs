@@ -9,6 +9,7 @@ mod bench;
 mod compare;
 mod gltf;
 mod interrupt;
+mod job;
 mod library;
 mod output;
 mod progress;

@@ -12,7 +12,7 @@ use pomkit_core::trace::{
     check_depth_scale,
 };
 
-use crate::bake::EdgesArg;
+use crate::job::EdgesArg;
 
 /// Options of the tracing techniques. Each applies to the techniques named in its help and is
 /// ignored by the others. Defaults and help come from the parameter table
