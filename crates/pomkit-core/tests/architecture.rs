@@ -136,12 +136,18 @@ fn referenced_modules(code: &str, modules: &BTreeSet<String>, top_level_file: bo
 /// pomkit-core's top-level modules (a folder module with its submodules counts as one) and the
 /// modules each one's code (tests aside) refers to.
 fn core_module_graph() -> BTreeMap<String, BTreeSet<String>> {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    module_graph(&Path::new(env!("CARGO_MANIFEST_DIR")).join("src"))
+}
+
+/// The module graph of the crate whose sources are in `src` (its root, lib.rs or main.rs,
+/// left out).
+fn module_graph(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
+    let src = src.to_path_buf();
     let mut files = Vec::new();
     sources(&src, &mut files);
     let module_of = |f: &Path| -> Option<String> {
         let first = f.strip_prefix(&src).ok()?.components().next()?.as_os_str().to_string_lossy().into_owned();
-        (first != "lib.rs").then(|| first.trim_end_matches(".rs").to_owned())
+        (first != "lib.rs" && first != "main.rs").then(|| first.trim_end_matches(".rs").to_owned())
     };
     let modules: BTreeSet<String> = files.iter().filter_map(|f| module_of(f)).collect();
     let mut graph: BTreeMap<String, BTreeSet<String>> = modules.iter().map(|m| (m.clone(), BTreeSet::new())).collect();
@@ -206,6 +212,20 @@ fn core_modules_import_one_another_without_a_cycle() {
     }
     assert!(graph["modes"].is_empty(), "modes imports {:?}", graph["modes"]);
     assert!(graph["table"].iter().all(|m| m == "modes"), "table imports {:?}", graph["table"]);
+}
+
+/// The command line's modules too: the verbs build on shared pieces (job.rs, batch.rs,
+/// technique.rs), never on one another in a ring.
+#[test]
+fn cli_modules_import_one_another_without_a_cycle() {
+    let graph = module_graph(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../pomkit-cli/src"));
+    assert!(
+        graph.len() > 10 && graph["bake"].contains("job") && graph["bake_height"].contains("job"),
+        "the command line's module graph was not read: {graph:#?}"
+    );
+    if let Some(cycle) = find_cycle(&graph) {
+        panic!("pomkit-cli's modules import one another in a cycle: {}\ngraph: {graph:#?}", cycle.join(" -> "));
+    }
 }
 
 #[test]
