@@ -91,10 +91,8 @@ impl GpuMaterial {
         };
         let explicit_normals = material.normal_map.as_ref().map(|n| upload_normal_map(ctx, n)).transpose()?;
         let albedo = {
-            let mut chain =
-                vec![material.albedo.as_ref().map_or_else(|| Texture::constant(Vec3::ONE), |t| (**t).clone())];
+            let base = material.albedo.as_ref().map_or_else(|| Texture::constant(Vec3::ONE), |t| (**t).clone());
             let limit = ctx.device.limits().max_texture_dimension_2d;
-            let base = &chain[0];
             if base.width() > limit || base.height() > limit {
                 return Err(GpuError::TooLarge {
                     what: format!("material \"{}\" albedo", material.name),
@@ -103,11 +101,7 @@ impl GpuMaterial {
                     limit,
                 });
             }
-            while let Some(last) = chain.last().filter(|t| t.width() > 1 || t.height() > 1) {
-                let next = last.downsample();
-                chain.push(next);
-            }
-            chain
+            base.mip_chain()
         };
         let albedo_tex =
             texture_with_mips(ctx, "pomkit albedo", wgpu::TextureFormat::Rgba16Float, &rgba_levels(&albedo));
