@@ -328,9 +328,14 @@ struct PomkitWalkState {
     last_patch: vec2<i32>,
 }
 
+// Integer division and remainder by a variable have no SIMD instruction on CPUs: llvmpipe
+// (lavapipe) does them lane by lane, which made them the largest cost of a step. So the walk
+// shifts by the level (sizes are powers of two, indices non-negative) and wraps with a float
+// floor; the results are the same integers.
+
 fn pomkit_level_cells(n: i32, level: u32) -> i32 {
     let size = 1 << level;
-    return (n + size - 1) / size;
+    return (n + size - 1) >> level;
 }
 
 /// One axis of `pomkit_cell_at`: the cell index and its walls.
@@ -342,12 +347,12 @@ fn pomkit_cell_axis(p: f32, dp: f32, n: i32, level: u32, edges: u32) -> vec3<f32
     if edges == POMKIT_WRAP {
         let tile = floor(fp / f32(n));
         let local = clamp(i32(fp - tile * f32(n)), 0, n - 1);
-        let c = min(local / size, cells - 1);
+        let c = min(local >> level, cells - 1);
         let base = tile * f32(n);
         return vec3<f32>(f32(c), base + f32(c * size), base + f32(min((c + 1) * size, n)));
     }
     let local = i32(clamp(fp, 0.0, f32(n - 1)));
-    let c = min(local / size, cells - 1);
+    let c = min(local >> level, cells - 1);
     var lo = f32(c * size);
     var hi = f32(min((c + 1) * size, n));
     if c == 0 {
@@ -423,11 +428,11 @@ fn pomkit_block_key(map: PomkitMap, c: PomkitCell, level: u32) -> vec2<i32> {
     if map.edges == POMKIT_WRAP {
         let size = f32(1 << level);
         return vec2<i32>(
-            i32(round(c.lo.x - f32(c.ix % 2) * size)),
-            i32(round(c.lo.y - f32(c.iy % 2) * size)),
+            i32(round(c.lo.x - f32(c.ix & 1) * size)),
+            i32(round(c.lo.y - f32(c.iy & 1) * size)),
         );
     }
-    return vec2<i32>(c.ix / 2, c.iy / 2);
+    return vec2<i32>(c.ix >> 1u, c.iy >> 1u);
 }
 
 /// Depth of mip-0 texel (i, j) with the map's edge mode.
@@ -435,7 +440,12 @@ fn pomkit_texel_depth(heights: texture_2d<f32>, map: PomkitMap, i: i32, j: i32) 
     let size = vec2<i32>(map.size);
     var p = vec2<i32>(i, j);
     if map.edges == POMKIT_WRAP {
-        p = ((p % size) + size) % size;
+        // p mod size, for any p: floor division in f32 (exact below 2^24), corrected by one
+        // period either way, and clamped so a texel far beyond that still reads in bounds.
+        var q = p - size * vec2<i32>(floor(vec2<f32>(p) / vec2<f32>(size)));
+        q = select(q, q + size, q < vec2<i32>(0));
+        q = select(q, q - size, q >= size);
+        p = clamp(q, vec2<i32>(0), size - 1);
     } else {
         p = clamp(p, vec2<i32>(0), size - 1);
     }

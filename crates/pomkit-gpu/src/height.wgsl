@@ -43,8 +43,14 @@ const FILTER_SOBEL: u32 = 1u;
 /// docs/REFERENCES.md, Errata, Lengyel's `& (size - 1)` erratum) or clamping. HeightField::depth_at.
 fn resolve(i: i32, n: i32, edges: u32) -> i32 {
     if edges == EDGES_WRAP {
-        // WGSL's % truncates toward zero; adding n once makes it Euclidean.
-        return ((i % n) + n) % n;
+        // A Euclidean remainder without `%`: integer division by a variable has no SIMD
+        // instruction on CPUs, so llvmpipe would do it lane by lane. Floor division in f32 is
+        // exact below 2^24, then one period of correction either way, and a clamp keeps a texel
+        // beyond that in bounds.
+        var q = i - n * i32(floor(f32(i) / f32(n)));
+        q = select(q, q + n, q < 0);
+        q = select(q, q - n, q >= n);
+        return clamp(q, 0, n - 1);
     }
     return clamp(i, 0, n - 1);
 }
