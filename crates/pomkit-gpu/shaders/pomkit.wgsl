@@ -423,6 +423,25 @@ fn pomkit_entered_cell(map: PomkitMap, level: u32, o: vec3<f32>, d: vec3<f32>, t
     return PomkitEntered(c, probe, t_exit, true);
 }
 
+/// The parent (at `level + 1`) of cell `c` of `level`: what `pomkit_cell_at` gives at `level + 1`
+/// for a point of `c`, found from `c`'s index and walls without the point (cheaper per step).
+fn pomkit_parent_cell(map: PomkitMap, c: PomkitCell, level: u32) -> PomkitCell {
+    let n = vec2<i32>(map.size);
+    let size = 1 << level;
+    let pi = vec2<i32>(c.ix >> 1u, c.iy >> 1u);
+    let lo_index = pi * (2 * size);
+    let hi_index = min(lo_index + 2 * size, n);
+    if map.edges == POMKIT_WRAP {
+        // The tile's origin, from the child's lower wall (integers in f32, exact below 2^24).
+        let base = c.lo - vec2<f32>(vec2<i32>(c.ix, c.iy) * size);
+        return PomkitCell(pi.x, pi.y, base + vec2<f32>(lo_index), base + vec2<f32>(hi_index));
+    }
+    let cells = vec2<i32>(pomkit_level_cells(n.x, level + 1u), pomkit_level_cells(n.y, level + 1u));
+    let lo = select(vec2<f32>(lo_index), vec2<f32>(-POMKIT_BIG), pi == vec2<i32>(0));
+    let hi = select(vec2<f32>(hi_index), vec2<f32>(POMKIT_BIG), pi == cells - 1);
+    return PomkitCell(pi.x, pi.y, lo, hi);
+}
+
 /// The 2x2 sibling block holding cell `c` (one gather reads all four).
 fn pomkit_block_key(map: PomkitMap, c: PomkitCell, level: u32) -> vec2<i32> {
     if map.edges == POMKIT_WRAP {
@@ -452,6 +471,31 @@ fn pomkit_texel_depth(heights: texture_2d<f32>, map: PomkitMap, i: i32, j: i32) 
     return textureLoad(heights, p, 0).r;
 }
 
+/// Depths of the four texels (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1) with the map's edge
+/// mode, as x, y, z, w: the corners of one bilinear patch. The edge mode is applied to (i, j)
+/// once and the neighbours found from it, the same texels `pomkit_texel_depth` reads.
+fn pomkit_patch_depths(heights: texture_2d<f32>, map: PomkitMap, i: i32, j: i32) -> vec4<f32> {
+    let size = vec2<i32>(map.size);
+    var p0 = vec2<i32>(i, j);
+    var p1 = p0 + 1;
+    if map.edges == POMKIT_WRAP {
+        var q = p0 - size * vec2<i32>(floor(vec2<f32>(p0) / vec2<f32>(size)));
+        q = select(q, q + size, q < vec2<i32>(0));
+        q = select(q, q - size, q >= size);
+        p0 = clamp(q, vec2<i32>(0), size - 1);
+        p1 = select(p0 + 1, vec2<i32>(0), p0 + 1 >= size);
+    } else {
+        p0 = clamp(p0, vec2<i32>(0), size - 1);
+        p1 = clamp(p1, vec2<i32>(0), size - 1);
+    }
+    return vec4<f32>(
+        textureLoad(heights, p0, 0).r,
+        textureLoad(heights, vec2<i32>(p1.x, p0.y), 0).r,
+        textureLoad(heights, vec2<i32>(p0.x, p1.y), 0).r,
+        textureLoad(heights, p1, 0).r,
+    );
+}
+
 /// First t in [ta, tb] where the ray is at or below the bilinear patch holding the segment's
 /// midpoint (trace.rs `patch_hit`); -1 when none.
 fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32) -> f32 {
@@ -463,10 +507,11 @@ fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<functio
         (*state).last_patch = key;
         (*state).fetches += 1u;
     }
-    let s00 = pomkit_texel_depth(heights, map, key.x, key.y);
-    let s10 = pomkit_texel_depth(heights, map, key.x + 1, key.y);
-    let s01 = pomkit_texel_depth(heights, map, key.x, key.y + 1);
-    let s11 = pomkit_texel_depth(heights, map, key.x + 1, key.y + 1);
+    let corners = pomkit_patch_depths(heights, map, key.x, key.y);
+    let s00 = corners.x;
+    let s10 = corners.y;
+    let s01 = corners.z;
+    let s11 = corners.w;
     let a = s00;
     let b = s10 - s00;
     let c = s01 - s00;
@@ -521,9 +566,10 @@ fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<functio
     return -1.0;
 }
 
-/// The patches a ray crosses inside one texel footprint (trace.rs `leaf_hit`): split at the
-/// texel-centre lines, at most three segments.
-fn pomkit_leaf_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32, c: PomkitCell) -> f32 {
+/// Where the ray's segment [ta, tb] inside level-0 cell `c` changes bilinear patch, ascending:
+/// its crossings of the texel-centre lines strictly inside the segment (tb where there is none),
+/// then tb itself.
+fn pomkit_leaf_ends(map: PomkitMap, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32, c: PomkitCell) -> vec3<f32> {
     var centre = c.lo + 0.5;
     if map.edges != POMKIT_WRAP {
         centre = vec2<f32>(f32(c.ix), f32(c.iy)) + 0.5;
@@ -542,7 +588,14 @@ fn pomkit_leaf_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function
             cut1 = tc;
         }
     }
-    let ends = array<f32, 3>(min(cut0, cut1), max(cut0, cut1), tb);
+    return vec3<f32>(min(cut0, cut1), max(cut0, cut1), tb);
+}
+
+/// The patches a ray crosses inside one texel footprint (trace.rs `leaf_hit`): split at the
+/// texel-centre lines, at most three segments.
+fn pomkit_leaf_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32, c: PomkitCell) -> f32 {
+    let cuts = pomkit_leaf_ends(map, o, d, ta, tb, c);
+    let ends = array<f32, 3>(cuts.x, cuts.y, cuts.z);
     var start = ta;
     for (var k = 0u; k < 3u; k++) {
         let end = ends[k];
@@ -570,56 +623,76 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
     var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
     var t = t0;
     var level = 0u;
+    // A level-0 cell being solved: where its patches end (`pomkit_leaf_ends`). Each step solves
+    // one patch, so lanes of a SIMD group that are in a leaf and lanes still walking share a
+    // step's cost, instead of every step paying for up to three patches.
+    var leaf = vec3<f32>(0.0);
+    var in_leaf = false;
     for (var it = 0u; it < POMKIT_EXACT_MAX_STEPS; it++) {
-        if t > t1 {
-            break;
-        }
-        let entered = pomkit_entered_cell(map, level, o, d, t, t1);
-        if !entered.ok {
-            break;
-        }
-        let c = entered.cell;
-        let probe = entered.probe;
-        let t_exit = entered.t_exit;
-        let key = pomkit_block_key(map, c, level);
-        let slot = min(level, 15u);
-        if any(blocks[slot] != key) {
-            blocks[slot] = key;
-            state.fetches += 1u;
-        }
-        let bound = textureLoad(pyramid, vec2<i32>(c.ix, c.iy), i32(level)).r;
-        var deepest = o.z + d.z * t;
-        if d.z >= 0.0 {
-            deepest = o.z + d.z * t_exit;
-        }
-        if deepest < bound {
-            if t_exit >= t1 {
+        if !in_leaf {
+            if t > t1 {
                 break;
             }
-            if level < top {
-                let parent = pomkit_cell_at(map, level + 1u, probe, d);
-                if pomkit_exit_time(parent, o, d, t, t1) <= t_exit {
-                    level += 1u;
+            let entered = pomkit_entered_cell(map, level, o, d, t, t1);
+            if !entered.ok {
+                break;
+            }
+            let c = entered.cell;
+            let t_exit = entered.t_exit;
+            let key = pomkit_block_key(map, c, level);
+            let slot = min(level, 15u);
+            if any(blocks[slot] != key) {
+                blocks[slot] = key;
+                state.fetches += 1u;
+            }
+            let bound = textureLoad(pyramid, vec2<i32>(c.ix, c.iy), i32(level)).r;
+            var deepest = o.z + d.z * t;
+            if d.z >= 0.0 {
+                deepest = o.z + d.z * t_exit;
+            }
+            if deepest < bound {
+                if t_exit >= t1 {
+                    break;
                 }
+                if level < top {
+                    let parent = pomkit_parent_cell(map, c, level);
+                    if pomkit_exit_time(parent, o, d, t, t1) <= t_exit {
+                        level += 1u;
+                    }
+                }
+                t = t_exit;
+                continue;
             }
-            t = t_exit;
-            continue;
-        }
-        if level > 0u {
-            if d.z > 0.0 {
-                t = max(t, (bound - o.z) / d.z);
+            if level > 0u {
+                if d.z > 0.0 {
+                    t = max(t, (bound - o.z) / d.z);
+                }
+                level -= 1u;
+                continue;
             }
-            level -= 1u;
-            continue;
+            // Level 0: the bilinear patches inside this texel footprint, one per step.
+            leaf = pomkit_leaf_ends(map, o, d, t, t_exit, c);
+            in_leaf = true;
         }
-        let h = pomkit_leaf_hit(heights, map, &state, o, d, t, t_exit, c);
+        // The first end past t: the segments `pomkit_leaf_hit` solves, in order.
+        var end = leaf.z;
+        if leaf.y > t {
+            end = leaf.y;
+        }
+        if leaf.x > t {
+            end = leaf.x;
+        }
+        let h = pomkit_patch_hit(heights, map, &state, o, d, t, end);
         if h >= 0.0 {
             return PomkitWalk(h, state.fetches);
         }
-        if t_exit >= t1 {
-            break;
+        t = end;
+        if end >= leaf.z {
+            in_leaf = false;
+            if end >= t1 {
+                break;
+            }
         }
-        t = t_exit;
     }
     return PomkitWalk(-1.0, state.fetches);
 }
@@ -659,10 +732,11 @@ fn pomkit_surface_depth(heights: texture_2d<f32>, map: PomkitMap, p: vec2<f32>) 
     let w = s - f;
     let i = i32(f.x);
     let j = i32(f.y);
-    let d00 = pomkit_texel_depth(heights, map, i, j);
-    let d10 = pomkit_texel_depth(heights, map, i + 1, j);
-    let d01 = pomkit_texel_depth(heights, map, i, j + 1);
-    let d11 = pomkit_texel_depth(heights, map, i + 1, j + 1);
+    let corners = pomkit_patch_depths(heights, map, i, j);
+    let d00 = corners.x;
+    let d10 = corners.y;
+    let d01 = corners.z;
+    let d11 = corners.w;
     let top = d00 + (d10 - d00) * w.x;
     let bottom = d01 + (d11 - d01) * w.x;
     return top + (bottom - top) * w.y;
