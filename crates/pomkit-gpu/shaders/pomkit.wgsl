@@ -423,35 +423,32 @@ fn pomkit_entered_cell(map: PomkitMap, level: u32, o: vec3<f32>, d: vec3<f32>, t
     return PomkitEntered(c, probe, t_exit, true);
 }
 
-/// The parent (at `level + 1`) of cell `c` of `level`: what `pomkit_cell_at` gives at `level + 1`
-/// for a point of `c`, found from `c`'s index and walls without the point (cheaper per step).
-fn pomkit_parent_cell(map: PomkitMap, c: PomkitCell, level: u32) -> PomkitCell {
+/// How many levels' cells the ray leaves when it leaves cell `c` of `level` at `t_exit` (before
+/// the end of its segment): those of `level` and of every coarser level that shares the wall it
+/// crosses. A wall at local texel index k (in 1..n-1) is a wall of level l's cells when 2^l
+/// divides k; a tile's edges (k = 0 or n) are walls of every level (32 stands for all).
+fn pomkit_levels_left(map: PomkitMap, c: PomkitCell, level: u32, o: vec3<f32>, d: vec3<f32>, t_exit: f32) -> u32 {
     let n = vec2<i32>(map.size);
     let size = 1 << level;
-    let pi = vec2<i32>(c.ix >> 1u, c.iy >> 1u);
-    let lo_index = pi * (2 * size);
-    let hi_index = min(lo_index + 2 * size, n);
-    if map.edges == POMKIT_WRAP {
-        // The tile's origin, from the child's lower wall (integers in f32, exact below 2^24).
-        let base = c.lo - vec2<f32>(vec2<i32>(c.ix, c.iy) * size);
-        return PomkitCell(pi.x, pi.y, base + vec2<f32>(lo_index), base + vec2<f32>(hi_index));
-    }
-    let cells = vec2<i32>(pomkit_level_cells(n.x, level + 1u), pomkit_level_cells(n.y, level + 1u));
-    let lo = select(vec2<f32>(lo_index), vec2<f32>(-POMKIT_BIG), pi == vec2<i32>(0));
-    let hi = select(vec2<f32>(hi_index), vec2<f32>(POMKIT_BIG), pi == cells - 1);
-    return PomkitCell(pi.x, pi.y, lo, hi);
+    let index = vec2<i32>(c.ix, c.iy);
+    // The wall ahead on each axis, as a local texel index and as a coordinate; the ray crosses
+    // it now if it reaches it at t_exit (the expressions of `pomkit_exit_time`, so equal).
+    let forward = d.xy > vec2<f32>(0.0);
+    let k = select(index * size, min((index + 1) * size, n), forward);
+    let wall = select(c.lo, c.hi, forward);
+    let crossed = (d.xy != vec2<f32>(0.0)) & ((wall - o.xy) / d.xy == vec2<f32>(t_exit));
+    let levels = select(countTrailingZeros(vec2<u32>(k)), vec2<u32>(32u), (k <= vec2<i32>(0)) | (k >= n));
+    let left = select(vec2<u32>(0u), levels, crossed);
+    return max(left.x, left.y);
 }
 
-/// The 2x2 sibling block holding cell `c` (one gather reads all four).
-fn pomkit_block_key(map: PomkitMap, c: PomkitCell, level: u32) -> vec2<i32> {
-    if map.edges == POMKIT_WRAP {
-        let size = f32(1 << level);
-        return vec2<i32>(
-            i32(round(c.lo.x - f32(c.ix & 1) * size)),
-            i32(round(c.lo.y - f32(c.iy & 1) * size)),
-        );
+/// `seen` without the blocks of the levels below `left` (`pomkit_levels_left`): the ray has left
+/// them.
+fn pomkit_forget_blocks(seen: u32, left: u32) -> u32 {
+    if left >= 32u {
+        return 0u;
     }
-    return vec2<i32>(c.ix >> 1u, c.iy >> 1u);
+    return seen & ~((1u << left) - 1u);
 }
 
 /// Depth of mip-0 texel (i, j) with the map's edge mode.
@@ -616,10 +613,11 @@ fn pomkit_leaf_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function
 /// least depth of each cell, level l in mip l (pomkit_gpu's `HeightMaps::pyramid`).
 fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> PomkitWalk {
     let top = map.pyramid_levels - 1u;
-    var blocks = array<vec2<i32>, 16>();
-    for (var k = 0u; k < 16u; k++) {
-        blocks[k] = vec2<i32>(-2147483647);
-    }
+    // Bit l: a cell of level l was read since the ray entered its current 2x2 sibling block
+    // there, so the block's gather is held (the CPU keeps each level's last block; a ray
+    // never comes back to a block it left, so a bit per level says the same, without an array
+    // indexed by level, which costs a shader more than the rest of a step).
+    var seen = 0u;
     var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
     var t = t0;
     var level = 0u;
@@ -628,6 +626,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
     // step's cost, instead of every step paying for up to three patches.
     var leaf = vec3<f32>(0.0);
     var in_leaf = false;
+    var leaf_left = 0u;
     for (var it = 0u; it < POMKIT_EXACT_MAX_STEPS; it++) {
         if !in_leaf {
             if t > t1 {
@@ -639,10 +638,9 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
             }
             let c = entered.cell;
             let t_exit = entered.t_exit;
-            let key = pomkit_block_key(map, c, level);
-            let slot = min(level, 15u);
-            if any(blocks[slot] != key) {
-                blocks[slot] = key;
+            let bit = 1u << min(level, 31u);
+            if (seen & bit) == 0u {
+                seen |= bit;
                 state.fetches += 1u;
             }
             let bound = textureLoad(pyramid, vec2<i32>(c.ix, c.iy), i32(level)).r;
@@ -654,11 +652,12 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
                 if t_exit >= t1 {
                     break;
                 }
-                if level < top {
-                    let parent = pomkit_parent_cell(map, c, level);
-                    if pomkit_exit_time(parent, o, d, t, t1) <= t_exit {
-                        level += 1u;
-                    }
+                let left = pomkit_levels_left(map, c, level, o, d, t_exit);
+                seen = pomkit_forget_blocks(seen, left);
+                // Climb only when the ray also leaves the parent cell (the wall it crosses is
+                // the parent's too): inside the same parent, climbing would only descend again.
+                if level < top && left > level {
+                    level += 1u;
                 }
                 t = t_exit;
                 continue;
@@ -672,6 +671,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
             }
             // Level 0: the bilinear patches inside this texel footprint, one per step.
             leaf = pomkit_leaf_ends(map, o, d, t, t_exit, c);
+            leaf_left = pomkit_levels_left(map, c, 0u, o, d, t_exit);
             in_leaf = true;
         }
         // The first end past t: the segments `pomkit_leaf_hit` solves, in order.
@@ -689,6 +689,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
         t = end;
         if end >= leaf.z {
             in_leaf = false;
+            seen = pomkit_forget_blocks(seen, leaf_left);
             if end >= t1 {
                 break;
             }
