@@ -304,6 +304,14 @@ fn pomkit_lod_weight(level: f32, threshold: f32) -> f32 {
 // per 2x2 sibling block of pyramid cells and one per bilinear patch, kept while the ray walks
 // between them.
 //
+// Shaped for SIMD (a GPU's warp, or llvmpipe's 8 lanes per instruction on a CPU), with the same
+// cells, patches and fetch counts as the CPU's loop: one bilinear patch per step (the CPU solves
+// a level-0 cell's up to three patches at once; here the lanes in a leaf and the lanes still
+// walking share each step); no integer division or remainder by a variable (levels are powers
+// of two: shifts); the held sibling blocks as one bit per level, cleared by the levels whose
+// walls the ray crosses, rather than an array indexed by level; the climb decided by that same
+// crossed wall. docs/BENCHMARKS.md ("The exact walk on lavapipe") measures each.
+//
 // Coordinates: texel units, x along u and y along v (texel (i, j) has its centre at
 // (i + 0.5, j + 0.5)); z is depth in [0, 1]. A ray is o + t d.
 
