@@ -336,8 +336,9 @@ fn write_yardstick_md(w: &mut dyn Write, setup: &str, rows: &[YardstickRow]) -> 
         "The honest yardstick on {setup}: the fewest samples N (pom with --min-samples = --max-samples = N, \
          tried from {start} to {cap}) with at most {share} of the rays over one texel from exact's hit, with \
          --refine 0 and --refine {k}, and pom's mean fetches, share over one texel and mean error at that N, \
-         beside exact's mean fetches on the same rays. \"not reached\": no N up to {cap} passed (the columns \
-         after it are then pom's at N={cap}).",
+         beside exact's mean fetches on the same rays; exact / best pom is exact's mean fetches over the fewer \
+         of the two pom mean fetches (below 1, exact is cheaper). \"not reached\": no N up to {cap} passed \
+         (the columns after it are then pom's at N={cap}).",
         start = o.start
     )?;
     writeln!(w)?;
