@@ -6,6 +6,11 @@
 //! generator, so no random-number crate is needed) and reports, per technique and angle, the
 //! mean, 95th percentile and share over one texel of that error, and the fetches per ray. This is
 //! the table behind `pomkit compare`.
+//!
+//! [`yardstick`] is `pomkit compare --yardstick`: on the same rays, the fewest samples with which
+//! `pom` (its least and most samples raised together) leaves no more than 0.1% of the rays over
+//! one texel, without and with secant refinement, beside exact's fetches; the search over the
+//! sample count is [`fewest_passing`].
 
 use glam::Vec2;
 use rayon::prelude::*;
@@ -274,6 +279,324 @@ fn summarize(
     }
 }
 
+/// The share over one texel `pom` may leave for the yardstick: 0.1% of the rays.
+pub const YARDSTICK_SHARE: f64 = 0.001;
+
+/// The smallest sample count the yardstick tries: pom's default `min_samples`.
+pub const YARDSTICK_START: u32 = 8;
+
+/// Secant refinement steps of the yardstick's refined search when none are asked for.
+pub const YARDSTICK_REFINE: u32 = 2;
+
+/// How many counts directly below the found one the yardstick's last step checks.
+pub const YARDSTICK_WINDOW: u32 = 8;
+
+/// What the yardstick looks for and how far ([`yardstick`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YardstickOptions {
+    /// The largest share of rays over one texel that passes, in `[0, 1]` (default 0.001).
+    pub max_share: f64,
+    /// The first sample count tried (default 8).
+    pub start: u32,
+    /// The largest sample count tried, at most [`MAX_SAMPLES`](crate::trace::MAX_SAMPLES)
+    /// (default 1024): a search that gets there without passing says "not reached".
+    pub cap: u32,
+    /// Counts directly below the found one that must fail before the search stops (default 8).
+    pub window: u32,
+    /// Secant refinement steps of the refined search (default 2; the plain search uses 0).
+    pub refine: u32,
+}
+
+impl Default for YardstickOptions {
+    fn default() -> Self {
+        Self {
+            max_share: YARDSTICK_SHARE,
+            start: YARDSTICK_START,
+            cap: crate::trace::MAX_SAMPLES,
+            window: YARDSTICK_WINDOW,
+            refine: YARDSTICK_REFINE,
+        }
+    }
+}
+
+/// One count tried by [`fewest_passing`], with what the evaluation gave there.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tried<T> {
+    /// The count.
+    pub n: u32,
+    /// Whether it passed.
+    pub passes: bool,
+    /// What the evaluation returned.
+    pub value: T,
+}
+
+/// The outcome of [`fewest_passing`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Search<T> {
+    /// Every count evaluated, each once, in the order tried.
+    pub tried: Vec<Tried<T>>,
+    /// The index in `tried` of the count found: the smallest passing count tried. `None` when
+    /// no count up to the cap passed ("not reached").
+    pub found: Option<usize>,
+}
+
+impl<T> Search<T> {
+    /// The count found and its evaluation, if any.
+    #[must_use]
+    pub fn found(&self) -> Option<&Tried<T>> {
+        self.found.map(|i| &self.tried[i])
+    }
+
+    /// The evaluation at count `n`, if it was tried.
+    #[must_use]
+    pub fn at(&self, n: u32) -> Option<&Tried<T>> {
+        self.tried.iter().find(|t| t.n == n)
+    }
+
+    /// The largest count tried (the cap when the search got there).
+    #[must_use]
+    pub fn largest(&self) -> Option<&Tried<T>> {
+        self.tried.iter().max_by_key(|t| t.n)
+    }
+}
+
+/// The fewest `n` in `start..=cap` whose evaluation passes, by a search that evaluates each
+/// count at most once and always ends.
+///
+/// `passes` need not be monotone in `n` (pom's share over one texel is not: more samples move
+/// every sample, and a sample that used to land on a thin feature can miss it). The search:
+/// 1. **doubling**: `start`, `2 start`, `4 start`, ... (the last one `cap`) up to the first
+///    count that passes; if even `cap` fails, nothing is found;
+/// 2. **bisection** between the last failing count of the doubling and that first passing one,
+///    keeping a failing lower and a passing upper end until they are adjacent;
+/// 3. **linear check downward** from the passing end, one count at a time, until `window`
+///    consecutive counts fail or `start` is reached; a count that passes on the way becomes the
+///    answer and the check goes on below it.
+///
+/// So the count found passes, every count tried below it failed, and the `window` counts
+/// directly below it (down to `start`) were all tried. A smaller passing count may exist beyond
+/// that window: the answer is the fewest the search can vouch for, not a proven minimum. At
+/// most `log2(cap / start) + 1` evaluations double, `log2(cap / 2)` bisect, and the linear
+/// check stops after `window` failures (every pass it meets moves it at least one count down).
+///
+/// `start` is raised to 1 and `cap` to `start`.
+pub fn fewest_passing<T>(
+    start: u32,
+    cap: u32,
+    window: u32,
+    mut evaluate: impl FnMut(u32) -> T,
+    passes: impl Fn(&T) -> bool,
+) -> Search<T> {
+    let start = start.max(1);
+    let cap = cap.max(start);
+    let mut tried: Vec<Tried<T>> = Vec::new();
+    let mut check = |n: u32, tried: &mut Vec<Tried<T>>| -> bool {
+        if let Some(t) = tried.iter().find(|t| t.n == n) {
+            return t.passes;
+        }
+        let value = evaluate(n);
+        let ok = passes(&value);
+        tried.push(Tried { n, passes: ok, value });
+        ok
+    };
+    // 1. Doubling.
+    let mut lo = None;
+    let mut hi = start;
+    loop {
+        if check(hi, &mut tried) {
+            break;
+        }
+        if hi == cap {
+            return Search { tried, found: None };
+        }
+        lo = Some(hi);
+        hi = hi.saturating_mul(2).min(cap);
+    }
+    // 2. Bisection: `lo` fails, `hi` passes.
+    if let Some(mut lo) = lo {
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if check(mid, &mut tried) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+    }
+    // 3. Linear check downward.
+    let (mut n, mut fails) = (hi, 0);
+    while n > start && fails < window {
+        n -= 1;
+        if check(n, &mut tried) {
+            hi = n;
+            fails = 0;
+        } else {
+            fails += 1;
+        }
+    }
+    let found = tried.iter().position(|t| t.n == hi);
+    Search { tried, found }
+}
+
+/// One of the yardstick's two searches: `pom` with `min_samples = max_samples = N` and
+/// `refine` secant steps, the rows of every `N` tried.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PomSearch {
+    /// Secant refinement steps.
+    pub refine: u32,
+    /// pom's accuracy row at every count tried (technique [`Technique::Pom`]).
+    pub search: Search<AccuracyRow>,
+}
+
+impl PomSearch {
+    /// The fewest samples found to pass, if any.
+    #[must_use]
+    pub fn samples(&self) -> Option<u32> {
+        self.search.found().map(|t| t.n)
+    }
+
+    /// pom's row at the count found, or at the largest count tried (the cap) when none passed.
+    #[must_use]
+    pub fn row(&self) -> &AccuracyRow {
+        &self.search.found().or_else(|| self.search.largest()).expect("a search tries at least one count").value
+    }
+
+    /// pom's row one count below the count found, if the search tried it (always, unless the
+    /// count found is the first one tried).
+    #[must_use]
+    pub fn row_below(&self) -> Option<&AccuracyRow> {
+        let n = self.samples()?;
+        self.search.at(n.checked_sub(1)?).map(|t| &t.value)
+    }
+}
+
+/// The yardstick at one view angle: the fewest samples with which `pom` (min = max = N) leaves
+/// no more than [`YardstickOptions::max_share`] of the rays over one texel, without and with
+/// secant refinement, beside exact's cost on the same rays.
+#[derive(Clone, Debug, PartialEq)]
+pub struct YardstickRow {
+    /// View angle from the normal, in degrees (a label when the rays were given).
+    pub angle_deg: f32,
+    /// Rays traced (the same rays for every count and for exact).
+    pub rays: usize,
+    /// The options searched with.
+    pub options: YardstickOptions,
+    /// pom without refinement.
+    pub plain: PomSearch,
+    /// pom with [`YardstickOptions::refine`] secant steps.
+    pub refined: PomSearch,
+    /// exact's row on the same rays (error 0; its fetches are the reference cost).
+    pub exact: AccuracyRow,
+}
+
+impl YardstickRow {
+    /// exact's mean fetches over the cheaper of the two pom counts found (by mean fetches):
+    /// below 1 when exact is cheaper than the cheapest pom that meets the bar. `None` when
+    /// neither search passed, or pom fetched nothing.
+    #[must_use]
+    pub fn ratio(&self) -> Option<f64> {
+        let best = [&self.plain, &self.refined]
+            .into_iter()
+            .filter(|s| s.samples().is_some())
+            .map(|s| s.row().mean_fetches)
+            .min_by(f64::total_cmp)?;
+        (best > 0.0).then(|| self.exact.mean_fetches / best)
+    }
+}
+
+/// Progress of [`yardstick`]: reported before each count is traced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YardstickStep {
+    /// The angle being searched.
+    pub angle_deg: f32,
+    /// The refinement steps of the search under way.
+    pub refine: u32,
+    /// The sample count about to be traced.
+    pub samples: u32,
+    /// Searches finished so far (two per angle in all).
+    pub searches_done: usize,
+}
+
+/// The yardstick per angle of `angles_deg`, on [`ray_set`]`(angle, rays_per_angle, seed)`
+/// (the rays [`compare`] traces): see [`yardstick_on_rays`]. `progress` is called on the
+/// calling thread before each count is traced.
+#[must_use]
+pub fn yardstick(
+    surface: &Surface,
+    angles_deg: &[f32],
+    params: &TraceParams,
+    rays_per_angle: usize,
+    seed: u64,
+    options: &YardstickOptions,
+    progress: &dyn Fn(YardstickStep),
+) -> Vec<YardstickRow> {
+    angles_deg
+        .iter()
+        .enumerate()
+        .map(|(i, &angle)| {
+            let rays = ray_set(angle, rays_per_angle, seed);
+            let tick = |mut step: YardstickStep| {
+                step.searches_done += 2 * i;
+                progress(step);
+            };
+            yardstick_on_rays(surface, &rays, angle, params, options, &tick)
+        })
+        .collect()
+}
+
+/// The yardstick on the given rays (`angle_deg` only labels the rows): [`fewest_passing`] over
+/// `pom`'s sample count N, with `min_samples = max_samples = N` and `refine` 0, then again
+/// with [`YardstickOptions::refine`] steps, each count's errors measured against
+/// [`Technique::Exact`]'s hits (traced once) as [`compare`] measures them. A count passes when
+/// its share of rays over one texel is at most [`YardstickOptions::max_share`].
+///
+/// The other parameters of `params` are kept (pom reads only `lod` of them); the options'
+/// `cap` is clamped to [`MAX_SAMPLES`](crate::trace::MAX_SAMPLES), which [`trace`] would
+/// clamp to anyway, and `start` into `1..=cap`.
+#[must_use]
+pub fn yardstick_on_rays(
+    surface: &Surface,
+    rays: &[Ray],
+    angle_deg: f32,
+    params: &TraceParams,
+    options: &YardstickOptions,
+    progress: &dyn Fn(YardstickStep),
+) -> YardstickRow {
+    let (w, h) = (surface.field().width(), surface.field().height());
+    let truths: Vec<Hit> = rays
+        .par_chunks(CHUNK)
+        .flat_map_iter(|c| c.iter().map(|r| trace(surface, r, Technique::Exact, params)))
+        .collect();
+    let mut zeros = vec![0.0; truths.len()];
+    let exact = summarize(Technique::Exact, angle_deg, &mut zeros, truths.iter().map(|t| t.fetches));
+    let cap = options.cap.min(crate::trace::MAX_SAMPLES);
+    let start = options.start.clamp(1, cap.max(1));
+    let search = |refine: u32, searches_done: usize| {
+        let evaluate = |n: u32| {
+            progress(YardstickStep { angle_deg, refine, samples: n, searches_done });
+            let p = TraceParams { min_samples: n, max_samples: n, refine, ..*params };
+            let samples: Vec<(f64, u32)> = rays
+                .par_chunks(CHUNK)
+                .zip(truths.par_chunks(CHUNK))
+                .flat_map_iter(|(rs, ts)| {
+                    rs.iter().zip(ts).map(|(ray, truth)| {
+                        let hit = trace(surface, ray, Technique::Pom, &p);
+                        (error_texels(&hit, truth, w, h), hit.fetches)
+                    })
+                })
+                .collect();
+            let mut errors: Vec<f64> = samples.iter().map(|s| s.0).collect();
+            summarize(Technique::Pom, angle_deg, &mut errors, samples.iter().map(|s| s.1))
+        };
+        let search = fewest_passing(start, cap, options.window, evaluate, |row| row.share_over_1 <= options.max_share);
+        PomSearch { refine, search }
+    };
+    let plain = search(0, 0);
+    let refined = search(options.refine, 1);
+    let options = YardstickOptions { start, cap, ..*options };
+    YardstickRow { angle_deg, rays: rays.len(), options, plain, refined, exact }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -390,6 +713,274 @@ mod tests {
             assert_eq!(row.max_fetches, max_f);
             assert!(row.mean_fetches <= f64::from(row.max_fetches));
             assert!(row.max_fetches <= row.technique.fetch_bound(&params, &surface));
+        }
+    }
+
+    /// The counts `fewest_passing` tried, in order.
+    fn ns<T>(s: &Search<T>) -> Vec<u32> {
+        s.tried.iter().map(|t| t.n).collect()
+    }
+
+    /// What `fewest_passing` promises of its answer, checked against the predicate itself.
+    fn check_promise<T>(s: &Search<T>, start: u32, window: u32, passes: impl Fn(u32) -> bool) {
+        let mut seen = ns(s);
+        seen.sort_unstable();
+        seen.dedup();
+        assert_eq!(seen.len(), s.tried.len(), "a count evaluated twice: {:?}", ns(s));
+        for t in &s.tried {
+            assert_eq!(t.passes, passes(t.n), "count {} misjudged", t.n);
+        }
+        let Some(found) = s.found() else { return };
+        assert!(passes(found.n), "{} reported but fails", found.n);
+        for t in &s.tried {
+            assert!(t.n >= found.n || !t.passes, "{} passed below the answer {}", t.n, found.n);
+        }
+        for n in found.n.saturating_sub(window).max(start)..found.n {
+            assert!(s.at(n).is_some_and(|t| !t.passes), "{n}, within the window below {}, not tried", found.n);
+        }
+    }
+
+    #[test]
+    fn fewest_passing_finds_a_monotone_threshold() {
+        let pow2: Vec<u32> = (3..=10).map(|k| 1 << k).collect();
+        for threshold in [1u32, 7, 8, 9, 15, 16, 17, 100, 383, 511, 512, 513, 1000, 1023, 1024, 1025, 5000] {
+            let passes = |n: u32| n >= threshold;
+            let s = fewest_passing(8, 1024, 8, |n| n, |&n| passes(n));
+            check_promise(&s, 8, 8, passes);
+            match threshold {
+                ..=8 => {
+                    assert_eq!(s.found().map(|t| t.n), Some(8));
+                    assert_eq!(ns(&s), [8], "8 passes: nothing else to try");
+                }
+                9..=1024 => assert_eq!(s.found().map(|t| t.n), Some(threshold), "threshold {threshold}"),
+                _ => {
+                    assert_eq!(s.found, None);
+                    assert_eq!(ns(&s), pow2, "not reached: the doubling up to the cap only");
+                }
+            }
+            // Doubling, bisection and the window, no more.
+            assert!(s.tried.len() <= 8 + 9 + 8, "{} evaluations for {threshold}", s.tried.len());
+        }
+    }
+
+    #[test]
+    fn fewest_passing_checks_below_a_count_that_passes_by_luck() {
+        // 57 passes alone below 60: bisection ends at 60 (59 fails) and the linear check finds 57.
+        let passes = |n: u32| n == 57 || n >= 60;
+        let s = fewest_passing(8, 1024, 8, |n| n, |&n| passes(n));
+        check_promise(&s, 8, 8, passes);
+        assert_eq!(s.found().map(|t| t.n), Some(57));
+        assert_eq!(&ns(&s)[..4], [8, 16, 32, 64], "doubling first");
+        // 50 passes alone, 10 below 60: beyond the window of eight, the search does not see it.
+        let passes = |n: u32| n == 50 || n >= 60;
+        let s = fewest_passing(8, 1024, 8, |n| n, |&n| passes(n));
+        check_promise(&s, 8, 8, passes);
+        assert_eq!(s.found().map(|t| t.n), Some(60));
+        assert!(s.at(50).is_none());
+        // A lucky pass in the doubling: bisection below it, then the window down to the floor.
+        let passes = |n: u32| n == 16 || n >= 100;
+        let s = fewest_passing(8, 1024, 8, |n| n, |&n| passes(n));
+        check_promise(&s, 8, 8, passes);
+        assert_eq!(s.found().map(|t| t.n), Some(16));
+        let mut below: Vec<u32> = ns(&s).into_iter().filter(|&n| n < 16).collect();
+        below.sort_unstable();
+        assert_eq!(below, (8..16).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn fewest_passing_always_ends() {
+        let never = |_: &u32| false;
+        assert_eq!(ns(&fewest_passing(8, 1024, 8, |n| n, never)), [8, 16, 32, 64, 128, 256, 512, 1024]);
+        assert_eq!(ns(&fewest_passing(8, 100, 8, |n| n, never)), [8, 16, 32, 64, 100]);
+        assert_eq!(ns(&fewest_passing(8, 3, 8, |n| n, never)), [8], "the cap is raised to the start");
+        assert_eq!(ns(&fewest_passing(0, 2, 8, |n| n, never)), [1, 2], "the start is raised to 1");
+        assert_eq!(ns(&fewest_passing(u32::MAX - 1, u32::MAX, 8, |n| n, never)), [u32::MAX - 1, u32::MAX]);
+        // Every count passes: the first is the answer.
+        let s = fewest_passing(8, 1024, 8, |n| n, |_| true);
+        assert_eq!((ns(&s), s.found), (vec![8], Some(0)));
+    }
+
+    /// Uniformly spaced entry points along a row, all travelling along +u at 45 degrees.
+    fn rays_along_u(count: usize, from_texel: f32, to_texel: f32, size: u32) -> Vec<Ray> {
+        (0..count)
+            .map(|k| {
+                let x = from_texel + (to_texel - from_texel) * (k as f32 + 0.5) / count as f32;
+                let v = (k as f32 * 0.618_034).fract();
+                Ray::at_angle(Vec2::new(x / size as f32, v), 45f32.to_radians(), 0.0)
+            })
+            .collect()
+    }
+
+    /// The share of `rays` over one texel for pom with `n` samples and `refine` steps, by
+    /// tracing here (not through the yardstick's code).
+    fn direct_share(surface: &Surface, rays: &[Ray], n: u32, refine: u32) -> f64 {
+        let p = TraceParams { min_samples: n, max_samples: n, refine, ..TraceParams::default() };
+        let (w, h) = (surface.field().width(), surface.field().height());
+        let over = rays
+            .iter()
+            .filter(|ray| {
+                let truth = trace(surface, ray, Technique::Exact, &p);
+                let hit = trace(surface, ray, Technique::Pom, &p);
+                let du = (f64::from(hit.uv.x) - f64::from(truth.uv.x)) * f64::from(w);
+                let dv = (f64::from(hit.uv.y) - f64::from(truth.uv.y)) * f64::from(h);
+                du.hypot(dv) > 1.0
+            })
+            .count();
+        over as f64 / rays.len() as f64
+    }
+
+    #[test]
+    fn yardstick_on_a_flat_plane_passes_at_once_with_the_fetches_it_must_take() {
+        // Depth 0.3: pom's entry sample, then samples at t = i / 8 until t >= 0.3, the third
+        // (t = 0.375): 1 + ceil(0.3 * 8) = 4 fetches on every ray at every angle, plus one per
+        // secant step; the linear intersection of a flat surface is exact.
+        let c = 0.3f32;
+        let surface = Surface::new(HeightField::constant(64, 64, c), EdgeMode::Wrap, 0.1);
+        let params = TraceParams::default();
+        let angles = [30.0, 60.0, 75.0, 85.0];
+        for refine in [2, 3] {
+            let options = YardstickOptions { refine, ..YardstickOptions::default() };
+            let rows = yardstick(&surface, &angles, &params, 300, 4, &options, &|_| {});
+            let table = compare(&surface, &[Technique::Exact], &angles, &params, 300, 4, &no_progress);
+            assert_eq!(rows.len(), angles.len());
+            let plain_fetches = 1.0 + (c * 8.0).ceil() as f64;
+            for (row, exact) in rows.iter().zip(&table) {
+                for (search, fetches) in
+                    [(&row.plain, plain_fetches), (&row.refined, plain_fetches + f64::from(refine))]
+                {
+                    assert_eq!(search.samples(), Some(8), "{}°", row.angle_deg);
+                    assert_eq!(ns(&search.search), [8], "8 passes: nothing else is traced");
+                    let r = search.row();
+                    assert_eq!((r.mean_fetches, f64::from(r.max_fetches)), (fetches, fetches), "{}°", row.angle_deg);
+                    assert_eq!(r.share_over_1, 0.0);
+                    assert!(r.mean_error < 1e-3, "{r:?}");
+                    assert_eq!(search.row_below(), None, "nothing below the start");
+                }
+                assert_eq!(row.refined.refine, refine);
+                // exact's cost, as compare measures it on the same rays.
+                assert_eq!(&row.exact, exact);
+                assert_eq!(row.ratio(), Some(exact.mean_fetches / plain_fetches));
+            }
+        }
+    }
+
+    /// A ridge two texels wide (depth 0) across a floor at depth 1, 256 texels square, depth
+    /// scale 0.25, and rays at 45 degrees across it: they travel L = 64 texels from depth 0 to
+    /// 1, and enter 16 to 48 texels before the ridge, so each meets it at a depth t between 1/4
+    /// and 3/4. There the bilinear surface is at or above the ray over a stretch of
+    /// W - 1 + 2t < 2.5 texels (the plateau between the two texel centres, and t on either
+    /// side). pom's samples are L / N texels apart: with N <= 25 they are over 2.5 texels apart,
+    /// longer than every ray's stretch, and of the rays meeting the ridge at depth t (their
+    /// entry points are spread evenly) a share 1 - (1 + 2t) N / L puts no sample on it, some 20%
+    /// in all; those find the floor at depth 1 past the ridge and land at least 15 texels from
+    /// exact's hit. Refinement cannot bring back a ridge the linear search stepped over. So no
+    /// N below L / 2.5, rounded up, 26, can pass, with or without refinement.
+    fn ridge() -> (Surface, Vec<Ray>, u32) {
+        let n = 256;
+        let field = HeightField::from_height_fn(n, n, |x, _| if x == 200 || x == 201 { 1.0 } else { 0.0 });
+        let surface = Surface::new(field, EdgeMode::Wrap, 0.25);
+        let rays = rays_along_u(2000, 152.0, 184.0, n);
+        (surface, rays, (64.0f32 / 2.5).ceil() as u32)
+    }
+
+    #[test]
+    fn yardstick_on_a_ridge_needs_samples_closer_than_its_width() {
+        let (surface, rays, bound) = ridge();
+        // The analytic bound, checked by tracing directly: every N below it fails by far.
+        for n in 8..bound {
+            assert!(direct_share(&surface, &rays, n, 0) > 0.05, "N = {n} below the bound");
+            assert!(direct_share(&surface, &rays, n, 2) > 0.05, "N = {n} (refine 2) below the bound");
+        }
+        let options = YardstickOptions::default();
+        let steps = std::cell::RefCell::new(Vec::new());
+        let row = yardstick_on_rays(&surface, &rays, 45.0, &TraceParams::default(), &options, &|s| {
+            steps.borrow_mut().push(s);
+        });
+        assert_eq!(row.rays, 2000);
+        for search in [&row.plain, &row.refined] {
+            let refine = search.refine;
+            let found = search.samples().unwrap_or_else(|| panic!("refine {refine}: not reached"));
+            assert!(found >= bound, "refine {refine}: {found} below the analytic bound {bound}");
+            check_promise(&search.search, 8, options.window, |n| {
+                direct_share(&surface, &rays, n, refine) <= options.max_share
+            });
+            // The count found passes and the one below it fails, traced here.
+            assert!(direct_share(&surface, &rays, found, refine) <= options.max_share);
+            assert!(direct_share(&surface, &rays, found - 1, refine) > options.max_share);
+            assert_eq!(search.row().share_over_1, direct_share(&surface, &rays, found, refine));
+            assert_eq!(
+                search.row_below().map(|r| r.share_over_1),
+                Some(direct_share(&surface, &rays, found - 1, refine))
+            );
+        }
+        assert_eq!(row.refined.refine, YARDSTICK_REFINE);
+        // Progress: one step per count traced, in order, each search's own.
+        let steps = steps.into_inner();
+        assert_eq!(steps.len(), row.plain.search.tried.len() + row.refined.search.tried.len());
+        let (plain, refined) = steps.split_at(row.plain.search.tried.len());
+        assert!(
+            plain
+                .iter()
+                .zip(&row.plain.search.tried)
+                .all(|(s, t)| s.samples == t.n && s.refine == 0 && s.searches_done == 0)
+        );
+        assert!(
+            refined
+                .iter()
+                .zip(&row.refined.search.tried)
+                .all(|(s, t)| s.samples == t.n && s.refine == 2 && s.searches_done == 1)
+        );
+    }
+
+    #[test]
+    fn yardstick_below_the_bound_is_not_reached() {
+        let (surface, rays, bound) = ridge();
+        let options = YardstickOptions { cap: 16, ..YardstickOptions::default() };
+        assert!(options.cap < bound);
+        let row = yardstick_on_rays(&surface, &rays, 45.0, &TraceParams::default(), &options, &|_| {});
+        for search in [&row.plain, &row.refined] {
+            assert_eq!(search.samples(), None);
+            assert_eq!(ns(&search.search), [8, 16]);
+            // The row shown is the cap's, and it fails.
+            assert_eq!(search.row(), &search.search.tried[1].value);
+            assert_eq!(search.row().share_over_1, direct_share(&surface, &rays, 16, search.refine));
+            assert!(search.row().share_over_1 > options.max_share);
+            assert_eq!(search.row_below(), None);
+        }
+        assert_eq!(row.ratio(), None);
+        // A cap above MAX_SAMPLES is held to it.
+        let wide = YardstickOptions { cap: 5000, ..YardstickOptions::default() };
+        let row = yardstick_on_rays(&surface, &rays[..10], 45.0, &TraceParams::default(), &wide, &|_| {});
+        assert_eq!(row.options.cap, crate::trace::MAX_SAMPLES);
+    }
+
+    #[test]
+    fn yardstick_rows_are_compare_rows_at_the_count_found() {
+        // On 64x64 pyramids at 80 degrees one ray of 400 grazes a pyramid's edge where the
+        // surface is above it for under 1/30 texel, which pom misses even with 1024 samples:
+        // not reached, and the row shown is the cap's. At 60 degrees N = 10 passes where 12 to
+        // 15 fail (the share is not monotone in N).
+        let surface = Surface::new(procedural::generate(Pattern::Pyramids, 64, 64), EdgeMode::Wrap, 0.1);
+        let params = TraceParams::default();
+        let angles = [60.0, 80.0];
+        let options = YardstickOptions { refine: 3, ..YardstickOptions::default() };
+        let rows = yardstick(&surface, &angles, &params, 400, 2, &options, &|_| {});
+        let found: Vec<[Option<u32>; 2]> = rows.iter().map(|r| [r.plain.samples(), r.refined.samples()]).collect();
+        assert_eq!(found, [[Some(10), Some(10)], [None, None]]);
+        for row in &rows {
+            let at = |search: &PomSearch| {
+                let n = search.samples().unwrap_or(options.cap);
+                let p = TraceParams { min_samples: n, max_samples: n, refine: search.refine, ..params };
+                compare(&surface, &[Technique::Pom], &[row.angle_deg], &p, 400, 2, &no_progress)
+            };
+            let plain = at(&row.plain);
+            assert_eq!((row.plain.row(), &row.exact), (&plain[0], &plain[1]));
+            let refined = at(&row.refined);
+            assert_eq!((row.refined.row(), &row.exact), (&refined[0], &refined[1]));
+            assert_eq!(row.refined.refine, 3);
+            let best = plain[0].mean_fetches.min(refined[0].mean_fetches);
+            let reached = row.plain.samples().is_some();
+            assert_eq!(row.ratio(), reached.then(|| row.exact.mean_fetches / best));
         }
     }
 
