@@ -3,25 +3,15 @@
 //! is unchanged with and without the flag (ARCHITECTURE.md, Stable interfaces), "not reached"
 //! is said, and bad flags fail clearly and leave no file behind.
 
+mod support;
+
 use std::path::Path;
-use std::process::{Command, Output};
 
 use pomkit_core::EdgeMode;
 use pomkit_core::accuracy::{self, YardstickOptions};
 use pomkit_core::procedural::{self, Pattern};
 use pomkit_core::trace::{Surface, TraceParams};
-
-fn pomkit(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pomkit")).args(args).current_dir(dir).output().expect("pomkit runs")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use support::{pomkit, stderr, stdout};
 
 fn run(args: &[&str], dir: &Path) -> String {
     let out = pomkit(args, dir);
