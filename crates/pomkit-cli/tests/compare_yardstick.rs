@@ -19,13 +19,6 @@ fn run(args: &[&str], dir: &Path) -> String {
     stdout(&out)
 }
 
-fn listing(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> =
-        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    v.sort();
-    v
-}
-
 /// The accuracy table's header (the stable one) and the yardstick's, written out here rather
 /// than taken from the binary's source.
 const CSV_HEADER: &str = "technique,angle,rays,mean_error,p95_error,share_over_1,mean_fetches,max_fetches";
@@ -178,14 +171,7 @@ fn bad_yardstick_flags_fail_clearly_and_leave_no_file() {
         (with(&["--yardstick-share", "0.01"]), vec!["--yardstick"]),
     ];
     for (args, needles) in &cases {
-        let out = pomkit(args, dir.path());
-        assert!(!out.status.success(), "{args:?} should fail");
-        let msg = stderr(&out);
-        for needle in needles {
-            assert!(msg.contains(needle), "{args:?}: message {msg:?} should mention {needle:?}");
-        }
-        assert!(!msg.contains("panicked"), "{args:?} panicked: {msg}");
-        assert!(listing(dir.path()).is_empty(), "{args:?} left a file behind");
+        support::refuses(args, dir.path(), needles);
     }
     let text = run(&["compare", "--help"], dir.path());
     for needle in ["--yardstick", "--yardstick-share", "--yardstick-cap", "not reached at N=1024", YARDSTICK_HEADER] {
