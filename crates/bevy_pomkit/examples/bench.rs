@@ -72,6 +72,11 @@ struct Args {
     /// METHOD:SHADOW:PDO (PDO camera, off or shadow-maps), e.g. pom:none:off,pom:soft:camera.
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
+    /// Time every method this many times, in turn (a process per method and round), and
+    /// report the median of each method's round medians: the machine's drift over a run then
+    /// falls on every method alike.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    rounds: u32,
     /// Time the one method given and print its row only (each method is timed in a process of
     /// its own: Bevy apps made one after another in a process slow down).
     #[arg(long, hide = true)]
@@ -176,33 +181,7 @@ fn main() {
         return;
     }
     if !args.no_timing {
-        println!("| method | frame time, median of {} (ms) | pomkit self-shadows | pixel depth offset |", args.frames);
-        println!("|---|--:|---|---|");
-        for t in &timed {
-            // A process per method, this program again with --child.
-            let mut child = std::process::Command::new(std::env::current_exe().expect("the running program"));
-            child.args([
-                "--child",
-                "--no-accuracy",
-                "--methods",
-                &t.method.name(),
-                "--frames",
-                &args.frames.to_string(),
-            ]);
-            child.args(["--pattern", &args.pattern, "--shadow", &t.shadow]);
-            if t.no_pixel_depth {
-                child.arg("--no-pixel-depth");
-            }
-            if t.shadow_pixel_depth {
-                child.arg("--shadow-pixel-depth");
-            }
-            match child.stderr(std::process::Stdio::null()).output() {
-                Ok(out) if out.status.success() => print!("{}", String::from_utf8_lossy(&out.stdout)),
-                Ok(out) => println!("| {} | failed ({}) | | |", t.method.name(), out.status),
-                Err(e) => println!("| {} | failed ({e}) | | |", t.method.name()),
-            }
-        }
-        println!();
+        time_methods(&timed, &args);
     }
     if args.no_accuracy {
         return;
@@ -230,6 +209,82 @@ fn main() {
             );
         }
     }
+}
+
+/// Times each of `timed` in a process of its own (this program again, with `--child`),
+/// `--rounds` times in turn, and prints the frame-time table: per method, the median of its
+/// round medians (with the rounds' medians when there are several).
+fn time_methods(timed: &[Timed], args: &Args) {
+    // Per method, per round: the child's row cells after the name (median, shadows, offset), or
+    // why it failed.
+    let mut rows: Vec<Vec<Result<Vec<String>, String>>> = timed.iter().map(|_| Vec::new()).collect();
+    for _ in 0..args.rounds {
+        for (t, row) in timed.iter().zip(&mut rows) {
+            let mut child = std::process::Command::new(std::env::current_exe().expect("the running program"));
+            child.args([
+                "--child",
+                "--no-accuracy",
+                "--methods",
+                &t.method.name(),
+                "--frames",
+                &args.frames.to_string(),
+            ]);
+            child.args(["--pattern", &args.pattern, "--shadow", &t.shadow]);
+            if t.no_pixel_depth {
+                child.arg("--no-pixel-depth");
+            }
+            if t.shadow_pixel_depth {
+                child.arg("--shadow-pixel-depth");
+            }
+            row.push(match child.stderr(std::process::Stdio::null()).output() {
+                Ok(out) if out.status.success() => {
+                    // `| name | ms | shadows | offset |`
+                    let line = String::from_utf8_lossy(&out.stdout).into_owned();
+                    let cells: Vec<String> =
+                        line.trim().trim_matches('|').split('|').map(|c| c.trim().to_owned()).collect();
+                    if cells.len() == 4 && cells[1].parse::<f64>().is_ok() {
+                        Ok(cells[1..].to_vec())
+                    } else {
+                        Err(format!("unexpected output {line:?}"))
+                    }
+                }
+                Ok(out) => Err(out.status.to_string()),
+                Err(e) => Err(e.to_string()),
+            });
+        }
+    }
+    let rounds = args.rounds;
+    if rounds == 1 {
+        println!("| method | frame time, median of {} (ms) | pomkit self-shadows | pixel depth offset |", args.frames);
+        println!("|---|--:|---|---|");
+    } else {
+        println!(
+            "| method | frame time, median of {rounds} rounds' medians of {} frames (ms) | pomkit self-shadows | pixel depth offset | each round (ms) |",
+            args.frames
+        );
+        println!("|---|--:|---|---|---|");
+    }
+    for (t, row) in timed.iter().zip(&rows) {
+        let name = t.method.name();
+        let failure = row.iter().find_map(|r| r.as_ref().err());
+        let ok: Vec<&Vec<String>> = row.iter().filter_map(|r| r.as_ref().ok()).collect();
+        let (Some(first), None) = (ok.first(), failure) else {
+            let why = failure.map_or("no round ran", String::as_str);
+            println!("| {name} | failed ({why}) | | |{}", if rounds == 1 { "" } else { " |" });
+            continue;
+        };
+        let mut ms: Vec<f64> = ok.iter().filter_map(|c| c[0].parse().ok()).collect();
+        let each = ms.iter().map(|m| format!("{m:.1}")).collect::<Vec<_>>().join(", ");
+        ms.sort_by(f64::total_cmp);
+        let half = ms.len() / 2;
+        let median = if ms.len() % 2 == 1 { ms[half] } else { 0.5 * (ms[half - 1] + ms[half]) };
+        if rounds == 1 {
+            println!("| {name} | {median:.1} | {} | {} |", first[1], first[2]);
+        } else {
+            println!("| {name} | {median:.1} | {} | {} | {each} |", first[1], first[2]);
+        }
+    }
+    println!();
 }
 
 /// The median time of `frames` frames of the demo scene with `opts` at 960 x 540.
