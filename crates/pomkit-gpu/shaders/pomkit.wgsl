@@ -310,7 +310,11 @@ fn pomkit_lod_weight(level: f32, threshold: f32) -> f32 {
 // walking share each step); no integer division or remainder by a variable (levels are powers
 // of two: shifts); the held sibling blocks as one bit per level, cleared by the levels whose
 // walls the ray crosses, rather than an array indexed by level; the climb decided by that same
-// crossed wall. docs/BENCHMARKS.md ("The exact walk on lavapipe") measures each.
+// crossed wall; one cell computed per step (a rounding retry waits for the next step); a patch's
+// four texels read with one gather. llvmpipe runs every instruction of the loop body for every
+// lane, whichever branch the lanes take (a branch no ray ever took, of 32 square roots and
+// divisions, added 40% to the pass), so there what the body holds is what a step costs.
+// docs/BENCHMARKS.md ("The exact walk on lavapipe") measures each.
 //
 // Coordinates: texel units, x along u and y along v (texel (i, j) has its centre at
 // (i + 0.5, j + 0.5)); z is depth in [0, 1]. A ray is o + t d.
@@ -434,20 +438,27 @@ fn pomkit_entered_cell(map: PomkitMap, level: u32, o: vec3<f32>, d: vec3<f32>, t
 /// How many levels' cells the ray leaves when it leaves cell `c` of `level` at `t_exit` (before
 /// the end of its segment): those of `level` and of every coarser level that shares the wall it
 /// crosses. A wall at local texel index k (in 1..n-1) is a wall of level l's cells when 2^l
-/// divides k; a tile's edges (k = 0 or n) are walls of every level (32 stands for all).
-fn pomkit_levels_left(map: PomkitMap, c: PomkitCell, level: u32, o: vec3<f32>, d: vec3<f32>, t_exit: f32) -> u32 {
+/// divides k; a tile's edges (k = 0 or n) are walls of every level (32 stands for all). `exits`
+/// are the times the ray reaches the wall ahead on each axis (`pomkit_wall_times`): it crosses
+/// that wall now if it reaches it at `t_exit`.
+fn pomkit_levels_left(map: PomkitMap, c: PomkitCell, level: u32, d: vec3<f32>, exits: vec2<f32>, t_exit: f32) -> u32 {
     let n = vec2<i32>(map.size);
     let size = 1 << level;
     let index = vec2<i32>(c.ix, c.iy);
-    // The wall ahead on each axis, as a local texel index and as a coordinate; the ray crosses
-    // it now if it reaches it at t_exit (the expressions of `pomkit_exit_time`, so equal).
     let forward = d.xy > vec2<f32>(0.0);
     let k = select(index * size, min((index + 1) * size, n), forward);
-    let wall = select(c.lo, c.hi, forward);
-    let crossed = (d.xy != vec2<f32>(0.0)) & ((wall - o.xy) / d.xy == vec2<f32>(t_exit));
+    let crossed = (d.xy != vec2<f32>(0.0)) & (exits == vec2<f32>(t_exit));
     let levels = select(countTrailingZeros(vec2<u32>(k)), vec2<u32>(32u), (k <= vec2<i32>(0)) | (k >= n));
     let left = select(vec2<u32>(0u), levels, crossed);
     return max(left.x, left.y);
+}
+
+/// The times the ray `o + t d` reaches the walls of `c` ahead of it on each axis, `t1` on an
+/// axis it does not move along: the expressions of `pomkit_exit_time`, so the least of them,
+/// limited to `[t, t1]`, is the cell's exit time bit for bit.
+fn pomkit_wall_times(c: PomkitCell, o: vec3<f32>, d: vec3<f32>, t1: f32) -> vec2<f32> {
+    let wall = select(c.lo, c.hi, d.xy > vec2<f32>(0.0));
+    return select(vec2<f32>(t1), (wall - o.xy) / d.xy, d.xy != vec2<f32>(0.0));
 }
 
 /// `seen` without the blocks of the levels below `left` (`pomkit_levels_left`): the ray has left
@@ -459,51 +470,23 @@ fn pomkit_forget_blocks(seen: u32, left: u32) -> u32 {
     return seen & ~((1u << left) - 1u);
 }
 
-/// Depth of mip-0 texel (i, j) with the map's edge mode.
-fn pomkit_texel_depth(heights: texture_2d<f32>, map: PomkitMap, i: i32, j: i32) -> f32 {
-    let size = vec2<i32>(map.size);
-    var p = vec2<i32>(i, j);
-    if map.edges == POMKIT_WRAP {
-        // p mod size, for any p: floor division in f32 (exact below 2^24), corrected by one
-        // period either way, and clamped so a texel far beyond that still reads in bounds.
-        var q = p - size * vec2<i32>(floor(vec2<f32>(p) / vec2<f32>(size)));
-        q = select(q, q + size, q < vec2<i32>(0));
-        q = select(q, q - size, q >= size);
-        p = clamp(q, vec2<i32>(0), size - 1);
-    } else {
-        p = clamp(p, vec2<i32>(0), size - 1);
-    }
-    return textureLoad(heights, p, 0).r;
-}
-
 /// Depths of the four texels (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1) with the map's edge
-/// mode, as x, y, z, w: the corners of one bilinear patch. The edge mode is applied to (i, j)
-/// once and the neighbours found from it, the same texels `pomkit_texel_depth` reads.
-fn pomkit_patch_depths(heights: texture_2d<f32>, map: PomkitMap, i: i32, j: i32) -> vec4<f32> {
-    let size = vec2<i32>(map.size);
-    var p0 = vec2<i32>(i, j);
-    var p1 = p0 + 1;
-    if map.edges == POMKIT_WRAP {
-        var q = p0 - size * vec2<i32>(floor(vec2<f32>(p0) / vec2<f32>(size)));
-        q = select(q, q + size, q < vec2<i32>(0));
-        q = select(q, q - size, q >= size);
-        p0 = clamp(q, vec2<i32>(0), size - 1);
-        p1 = select(p0 + 1, vec2<i32>(0), p0 + 1 >= size);
-    } else {
-        p0 = clamp(p0, vec2<i32>(0), size - 1);
-        p1 = clamp(p1, vec2<i32>(0), size - 1);
-    }
-    return vec4<f32>(
-        textureLoad(heights, p0, 0).r,
-        textureLoad(heights, vec2<i32>(p1.x, p0.y), 0).r,
-        textureLoad(heights, vec2<i32>(p0.x, p1.y), 0).r,
-        textureLoad(heights, p1, 0).r,
-    );
+/// mode, as x, y, z, w: the corners of one bilinear patch, read with one gather. `samp` addresses
+/// the map as its edge mode does (repeat for wrap, clamp to edge for clamp: the sampler
+/// `pomkit_trace` takes), so the gather reads texel (i mod w, j mod h) and its neighbours where
+/// the map wraps, the nearest texels inside it where it clamps, as the CPU's `depth_at` does. Its
+/// point is the patch's centre, the corner (i + 1, j + 1) the four texels share, half a texel
+/// from any other footprint. One gather instead of four loads: the lanes of a SIMD group run the patch
+/// code at every step of the walk, and on lavapipe the four loads were half its cost.
+fn pomkit_patch_depths(heights: texture_2d<f32>, samp: sampler, map: PomkitMap, i: i32, j: i32) -> vec4<f32> {
+    // Gather order: (i, j + 1), (i + 1, j + 1), (i + 1, j), (i, j).
+    let g = textureGather(0, heights, samp, vec2<f32>(f32(i + 1), f32(j + 1)) / map.size);
+    return vec4<f32>(g.w, g.z, g.x, g.y);
 }
 
 /// First t in [ta, tb] where the ray is at or below the bilinear patch holding the segment's
 /// midpoint (trace.rs `patch_hit`); -1 when none.
-fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32) -> f32 {
+fn pomkit_patch_hit(heights: texture_2d<f32>, samp: sampler, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32) -> f32 {
     let mid = o + d * (0.5 * (ta + tb));
     let i = floor(mid.x - 0.5);
     let j = floor(mid.y - 0.5);
@@ -512,7 +495,7 @@ fn pomkit_patch_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<functio
         (*state).last_patch = key;
         (*state).fetches += 1u;
     }
-    let corners = pomkit_patch_depths(heights, map, key.x, key.y);
+    let corners = pomkit_patch_depths(heights, samp, map, key.x, key.y);
     let s00 = corners.x;
     let s10 = corners.y;
     let s01 = corners.z;
@@ -598,7 +581,7 @@ fn pomkit_leaf_ends(map: PomkitMap, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32
 
 /// The patches a ray crosses inside one texel footprint (trace.rs `leaf_hit`): split at the
 /// texel-centre lines, at most three segments.
-fn pomkit_leaf_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32, c: PomkitCell) -> f32 {
+fn pomkit_leaf_hit(heights: texture_2d<f32>, samp: sampler, map: PomkitMap, state: ptr<function, PomkitWalkState>, o: vec3<f32>, d: vec3<f32>, ta: f32, tb: f32, c: PomkitCell) -> f32 {
     let cuts = pomkit_leaf_ends(map, o, d, ta, tb, c);
     let ends = array<f32, 3>(cuts.x, cuts.y, cuts.z);
     var start = ta;
@@ -607,7 +590,7 @@ fn pomkit_leaf_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function
         if end <= start && !(end == tb && start == ta) {
             continue;
         }
-        let h = pomkit_patch_hit(heights, map, state, o, d, start, end);
+        let h = pomkit_patch_hit(heights, samp, map, state, o, d, start, end);
         if h >= 0.0 {
             return h;
         }
@@ -619,7 +602,7 @@ fn pomkit_leaf_hit(heights: texture_2d<f32>, map: PomkitMap, state: ptr<function
 /// First t in [t0, t1] where the ray o + t d (texel x, y; depth z) is at or below the bilinear
 /// surface of the mip-0 texels of `heights`; t = -1 when it stays above. `pyramid` holds the
 /// least depth of each cell, level l in mip l (pomkit_gpu's `HeightMaps::pyramid`).
-fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> PomkitWalk {
+fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> PomkitWalk {
     let top = map.pyramid_levels - 1u;
     // Bit l: a cell of level l was read since the ray entered its current 2x2 sibling block
     // there, so the block's gather is held (the CPU keeps each level's last block; a ray
@@ -635,17 +618,33 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
     var leaf = vec3<f32>(0.0);
     var in_leaf = false;
     var leaf_left = 0u;
+    // A probe moved across a wall that rounding put behind the point (`pomkit_entered_cell`'s
+    // second try, taken at the next step so that a step computes one cell, not two: a SIMD
+    // group runs every instruction of the loop body for every lane).
+    var nudged = vec2<f32>(0.0);
+    var has_nudge = false;
     for (var it = 0u; it < POMKIT_EXACT_MAX_STEPS; it++) {
         if !in_leaf {
             if t > t1 {
                 break;
             }
-            let entered = pomkit_entered_cell(map, level, o, d, t, t1);
-            if !entered.ok {
-                break;
+            let probe = select((o + d * t).xy, nudged, has_nudge);
+            let c = pomkit_cell_at(map, level, probe, d);
+            let exits = pomkit_wall_times(c, o, d, t1);
+            let t_exit = max(min(min(exits.x, exits.y), t1), t);
+            if !(t_exit > t) && t < t1 {
+                if has_nudge {
+                    // No wall ahead can be told from the current point in f32.
+                    break;
+                }
+                // Rounding put the point on the wrong side of a wall the ray is leaving: step
+                // half a texel across it.
+                let across = select(c.lo - 0.5, c.hi + 0.5, d.xy > vec2<f32>(0.0));
+                nudged = select(probe, across, (d.xy != vec2<f32>(0.0)) & (exits <= vec2<f32>(t)));
+                has_nudge = true;
+                continue;
             }
-            let c = entered.cell;
-            let t_exit = entered.t_exit;
+            has_nudge = false;
             let bit = 1u << min(level, 31u);
             if (seen & bit) == 0u {
                 seen |= bit;
@@ -656,11 +655,13 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
             if d.z >= 0.0 {
                 deepest = o.z + d.z * t_exit;
             }
+            // The levels whose cells the ray leaves at t_exit: for the climb and for the
+            // blocks it forgets, whether it skips this cell or solves it as a leaf.
+            let left = pomkit_levels_left(map, c, level, d, exits, t_exit);
             if deepest < bound {
                 if t_exit >= t1 {
                     break;
                 }
-                let left = pomkit_levels_left(map, c, level, o, d, t_exit);
                 seen = pomkit_forget_blocks(seen, left);
                 // Climb only when the ray also leaves the parent cell (the wall it crosses is
                 // the parent's too): inside the same parent, climbing would only descend again.
@@ -679,7 +680,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
             }
             // Level 0: the bilinear patches inside this texel footprint, one per step.
             leaf = pomkit_leaf_ends(map, o, d, t, t_exit, c);
-            leaf_left = pomkit_levels_left(map, c, 0u, o, d, t_exit);
+            leaf_left = left;
             in_leaf = true;
         }
         // The first end past t: the segments `pomkit_leaf_hit` solves, in order.
@@ -690,7 +691,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, ma
         if leaf.x > t {
             end = leaf.x;
         }
-        let h = pomkit_patch_hit(heights, map, &state, o, d, t, end);
+        let h = pomkit_patch_hit(heights, samp, map, &state, o, d, t, end);
         if h >= 0.0 {
             return PomkitWalk(h, state.fetches);
         }
@@ -735,13 +736,13 @@ const POMKIT_CONE_TOP_MARGIN: f32 = 0.000732421875;
 
 /// The bilinear surface's depth at texel coordinates `p` (texel centres at half-integers), from
 /// four mip-0 texels (cone/mod.rs `surface_depth`).
-fn pomkit_surface_depth(heights: texture_2d<f32>, map: PomkitMap, p: vec2<f32>) -> f32 {
+fn pomkit_surface_depth(heights: texture_2d<f32>, samp: sampler, map: PomkitMap, p: vec2<f32>) -> f32 {
     let s = p - 0.5;
     let f = floor(s);
     let w = s - f;
     let i = i32(f.x);
     let j = i32(f.y);
-    let corners = pomkit_patch_depths(heights, map, i, j);
+    let corners = pomkit_patch_depths(heights, samp, map, i, j);
     let d00 = corners.x;
     let d10 = corners.y;
     let d01 = corners.z;
@@ -754,7 +755,7 @@ fn pomkit_surface_depth(heights: texture_2d<f32>, map: PomkitMap, p: vec2<f32>) 
 /// First t in [t0, t1] where the ray o + t d (texel x, y; depth z, going down) is at or below
 /// the bilinear surface, by cone stepping on the cones in `pyramid`'s mip 0; t = -1 when none.
 /// `binary_steps` halvings refine a crossing found after a relaxed cone's step.
-fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32, binary_steps: u32) -> PomkitWalk {
+fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32, binary_steps: u32) -> PomkitWalk {
     var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
     let horizontal = length(d.xy);
     var t = t0;
@@ -775,7 +776,7 @@ fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map
         state.fetches += 1u;
         if cone.y == 0.0 {
             // No cone map here: exact's walk from this point on.
-            let rest = pomkit_exact_first_hit(heights, pyramid, map, o, d, t, t1);
+            let rest = pomkit_exact_first_hit(heights, pyramid, samp, map, o, d, t, t1);
             return PomkitWalk(rest.t, state.fetches + rest.fetches);
         }
         let relaxed = cone.y < 0.0;
@@ -789,7 +790,7 @@ fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map
                 // The look after a relaxed step.
                 state.fetches += 1u;
                 let q = o + d * next;
-                if pomkit_surface_depth(heights, map, q.xy) <= q.z {
+                if pomkit_surface_depth(heights, samp, map, q.xy) <= q.z {
                     bracketed = true;
                     lo = t;
                     hi = next;
@@ -799,7 +800,7 @@ fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map
             t = next;
             continue;
         }
-        let h = pomkit_leaf_hit(heights, map, &state, o, d, t, min(entered.t_exit, t1), c);
+        let h = pomkit_leaf_hit(heights, samp, map, &state, o, d, t, min(entered.t_exit, t1), c);
         if h >= 0.0 {
             return PomkitWalk(h, state.fetches);
         }
@@ -812,7 +813,7 @@ fn pomkit_cone_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, map
         let mid = 0.5 * (lo + hi);
         let q = o + d * mid;
         state.fetches += 1u;
-        if pomkit_surface_depth(heights, map, q.xy) <= q.z {
+        if pomkit_surface_depth(heights, samp, map, q.xy) <= q.z {
             hi = mid;
         } else {
             lo = mid;
@@ -1094,17 +1095,17 @@ fn pomkit_entry_tile(uv: vec2<f32>, edges: u32) -> vec2<f32> {
     return vec2<f32>(0.0);
 }
 
-fn pomkit_trace_exact(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>) -> PomkitHit {
-    return pomkit_trace_walk(heights, pyramid, params, uv0, dir, false);
+fn pomkit_trace_exact(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>) -> PomkitHit {
+    return pomkit_trace_walk(heights, pyramid, samp, params, uv0, dir, false);
 }
 
 /// Cone stepping (cone.wesl) on the cones in `pyramid`'s mip 0 (green), or exact's walk where
 /// the pyramid has none: the exact hit either way.
-fn pomkit_trace_cone(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>) -> PomkitHit {
-    return pomkit_trace_walk(heights, pyramid, params, uv0, dir, true);
+fn pomkit_trace_cone(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>) -> PomkitHit {
+    return pomkit_trace_walk(heights, pyramid, samp, params, uv0, dir, true);
 }
 
-fn pomkit_trace_walk(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, cones: bool) -> PomkitHit {
+fn pomkit_trace_walk(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, cones: bool) -> PomkitHit {
     let map = pomkit_map(heights, pyramid, params);
     let s = pomkit_ray_extent(dir, params.depth_scale);
     let tile = pomkit_entry_tile(uv0, map.edges);
@@ -1112,9 +1113,9 @@ fn pomkit_trace_walk(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params:
     let d = vec3<f32>(s * map.size, 1.0);
     var walk: PomkitWalk;
     if cones {
-        walk = pomkit_cone_first_hit(heights, pyramid, map, o, d, 0.0, 1.0, params.binary_steps);
+        walk = pomkit_cone_first_hit(heights, pyramid, samp, map, o, d, 0.0, 1.0, params.binary_steps);
     } else {
-        walk = pomkit_exact_first_hit(heights, pyramid, map, o, d, 0.0, 1.0);
+        walk = pomkit_exact_first_hit(heights, pyramid, samp, map, o, d, 0.0, 1.0);
     }
     var t = walk.t;
     if t < 0.0 {
@@ -1168,10 +1169,10 @@ fn pomkit_trace_in_tile(technique: u32, heights: texture_2d<f32>, pyramid: textu
             return pomkit_trace_relief(heights, samp, params, uv, dir, lod);
         }
         case POMKIT_EXACT: {
-            return pomkit_trace_exact(heights, pyramid, params, uv, dir);
+            return pomkit_trace_exact(heights, pyramid, samp, params, uv, dir);
         }
         case POMKIT_CONE: {
-            return pomkit_trace_cone(heights, pyramid, params, uv, dir);
+            return pomkit_trace_cone(heights, pyramid, samp, params, uv, dir);
         }
         default: {
             return PomkitHit(uv, 0.0, 0u);
@@ -1270,7 +1271,7 @@ fn pomkit_view_curvature(view_ts: vec3<f32>, curvature: vec3<f32>, depth_scale: 
 /// `exact` along the bent ray: the parabola z = t - c t^2 as chords, each walked exactly (the
 /// chords lie inside the parabola by at most |c| dt^2 / 4). The hit's `depth` and `ray_depth`
 /// are its straight depth; `left` when the ray left without a hit.
-fn pomkit_exact_curved(heights: texture_2d<f32>, pyramid: texture_2d<f32>, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, bend: PomkitBend) -> PomkitCurvedHit {
+fn pomkit_exact_curved(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampler, params: PomkitParams, uv0: vec2<f32>, dir: vec3<f32>, bend: PomkitBend) -> PomkitCurvedHit {
     let map = pomkit_map(heights, pyramid, params);
     let s = pomkit_ray_extent(dir, params.depth_scale);
     let o = uv0 * map.size;
@@ -1288,7 +1289,7 @@ fn pomkit_exact_curved(heights: texture_2d<f32>, pyramid: texture_2d<f32>, param
         let za = ta - c * ta * ta;
         let zb = tb - c * tb * tb;
         let slope = (zb - za) / (tb - ta);
-        let walk = pomkit_exact_first_hit(heights, pyramid, map, vec3<f32>(o, za - slope * ta), vec3<f32>(dxy, slope), ta, tb);
+        let walk = pomkit_exact_first_hit(heights, pyramid, samp, map, vec3<f32>(o, za - slope * ta), vec3<f32>(dxy, slope), ta, tb);
         fetches += walk.fetches;
         if walk.t >= 0.0 {
             return PomkitCurvedHit(PomkitHit((o + dxy * walk.t) / map.size, walk.t, fetches), walk.t, false);
@@ -1346,19 +1347,19 @@ fn pomkit_trace_curved(technique: u32, heights: texture_2d<f32>, pyramid: textur
         case POMKIT_CONE: {
             if bend.c == 0.0 {
                 // A flat surface: the cones hold for this straight ray.
-                hit = pomkit_trace_cone(heights, pyramid, params, uv0, dir);
+                hit = pomkit_trace_cone(heights, pyramid, samp, params, uv0, dir);
                 t = hit.depth;
                 found = true;
             } else {
                 // The cones hold for straight rays only: walk the bent one as exact does.
-                let r = pomkit_exact_curved(heights, pyramid, params, uv0, dir, bend);
+                let r = pomkit_exact_curved(heights, pyramid, samp, params, uv0, dir, bend);
                 hit = r.hit;
                 t = r.ray_depth;
                 found = !r.left;
             }
         }
         case POMKIT_EXACT: {
-            let r = pomkit_exact_curved(heights, pyramid, params, uv0, dir, bend);
+            let r = pomkit_exact_curved(heights, pyramid, samp, params, uv0, dir, bend);
             hit = r.hit;
             t = r.ray_depth;
             found = !r.left;
@@ -1431,7 +1432,7 @@ fn pomkit_shadow(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: sampl
         let z0 = max(on_surface - eps, 0.0);
         let o = vec3<f32>(uv * map.size, z0);
         let d = vec3<f32>(s * map.size, -1.0);
-        let walk = pomkit_exact_first_hit(heights, pyramid, map, o, d, min(eps, z0), z0);
+        let walk = pomkit_exact_first_hit(heights, pyramid, samp, map, o, d, min(eps, z0), z0);
         return PomkitShadow(select(1.0, 0.0, walk.t >= 0.0), walk.fetches + 1u);
     }
     // Hard and soft: the receiver lifted onto the surface the march reads (one fetch). A hit
