@@ -476,8 +476,8 @@ fn pomkit_forget_blocks(seen: u32, left: u32) -> u32 {
 /// `pomkit_trace` takes), so the gather reads texel (i mod w, j mod h) and its neighbours where
 /// the map wraps, the nearest texels inside it where it clamps, as the CPU's `depth_at` does. Its
 /// point is the patch's centre, the corner (i + 1, j + 1) the four texels share, half a texel
-/// from any other footprint. One gather instead of four loads: the lanes of a SIMD group run the patch
-/// code at every step of the walk, and on lavapipe the four loads were half its cost.
+/// from any other footprint. One gather instead of four loads: the lanes of a SIMD group run
+/// the patch code at every step of the walk, and on lavapipe the four loads were half its cost.
 fn pomkit_patch_depths(heights: texture_2d<f32>, samp: sampler, map: PomkitMap, i: i32, j: i32) -> vec4<f32> {
     // Gather order: (i, j + 1), (i + 1, j + 1), (i + 1, j), (i, j).
     let g = textureGather(0, heights, samp, vec2<f32>(f32(i + 1), f32(j + 1)) / map.size);
