@@ -599,6 +599,20 @@ fn pomkit_leaf_hit(heights: texture_2d<f32>, samp: sampler, map: PomkitMap, stat
     return -1.0;
 }
 
+/// The level the walk starts at (trace.rs `start_level`): `floor(log2(travel)) - 3` for a
+/// horizontal travel of at least 8 texels, else 0, and never above `top`. From the f32 travel,
+/// so it can differ from the CPU's only for a travel within rounding of a power of two (the
+/// fetches and steps then differ, not the hit).
+fn pomkit_start_level(d: vec3<f32>, t0: f32, t1: f32, top: u32) -> u32 {
+    let travel = length(d.xy) * (t1 - t0);
+    if !(travel >= 8.0) {
+        return 0u;
+    }
+    // 4294967040 is the largest f32 below 2^32: the conversion stays in range.
+    let whole = u32(min(travel, 4294967040.0));
+    return min(firstLeadingBit(whole) - 3u, top);
+}
+
 /// First t in [t0, t1] where the ray o + t d (texel x, y; depth z) is at or below the bilinear
 /// surface of the mip-0 texels of `heights`; t = -1 when it stays above. `pyramid` holds the
 /// least depth of each cell, level l in mip l (pomkit_gpu's `HeightMaps::pyramid`).
@@ -611,7 +625,8 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, sa
     var seen = 0u;
     var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
     var t = t0;
-    var level = 0u;
+    // A few levels above the finest, from the ray's travel (`pomkit_start_level`).
+    var level = pomkit_start_level(d, t0, t1, top);
     // A level-0 cell being solved: where its patches end (`pomkit_leaf_ends`). Each step solves
     // one patch, so lanes of a SIMD group that are in a leaf and lanes still walking share a
     // step's cost, instead of every step paying for up to three patches.
