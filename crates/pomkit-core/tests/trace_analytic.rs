@@ -164,6 +164,31 @@ fn exact_finds_the_one_texel_spike_at_85_degrees_where_pom_misses() {
 }
 
 #[test]
+fn exact_ends_on_a_floor_at_depth_one_without_descending_to_its_patches() {
+    // A cell whose least depth is 1, the deepest a field holds, is a flat floor: the walk meets
+    // it where the ray reaches depth 1, without a fetch per level down to level 0 and a patch.
+    // The same floor a little higher (depth 1 - 2^-10) must be descended to, so every ray takes
+    // more fetches there; both hits are where the ray reaches the floor's depth.
+    let n = 512;
+    let higher = 1.0 - 1.0 / 1024.0;
+    for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
+        let floor = Surface::new(HeightField::constant(n, n, 1.0), edges, 0.1);
+        let raised = Surface::new(HeightField::constant(n, n, higher), edges, 0.1);
+        for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
+            for ray in rays_over(24, angle, 11) {
+                let p = TraceParams::default();
+                let (a, b) = (trace(&floor, &ray, Technique::Exact, &p), trace(&raised, &ray, Technique::Exact, &p));
+                for (hit, z) in [(a, 1.0f32), (b, higher)] {
+                    let texels = ((hit.uv - on_ray(&ray, f64::from(z), 0.1)) * n as f32).length();
+                    assert!((hit.depth - z).abs() < 1e-5 && texels < 1e-3, "{edges:?} {angle}deg {ray:?}: {hit:?}");
+                }
+                assert!(a.fetches < b.fetches, "{edges:?} {angle}deg {ray:?}: {} vs {} fetches", a.fetches, b.fetches);
+            }
+        }
+    }
+}
+
+#[test]
 fn adaptive_sample_count_grows_toward_grazing() {
     assert_eq!(adaptive_samples(1.0, 8, 32), 8);
     assert_eq!(adaptive_samples(0.0, 8, 32), 32);

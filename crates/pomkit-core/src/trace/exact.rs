@@ -19,7 +19,8 @@ pub(crate) struct ExactResult {
 /// traversal (after Tevs, Ihrke & Seidel 2008, "Maximum Mipmaps for Fast, Accurate, and
 /// Scalable Dynamic Height Field Rendering").
 ///
-/// A cell whose minimum depth the ray never reaches inside it is skipped whole; otherwise the
+/// A cell whose minimum depth the ray never reaches inside it is skipped whole; a cell whose
+/// minimum depth is 1 is a flat floor, met where the ray reaches depth 1; otherwise the
 /// walk descends, and in a level-0 cell the ray is solved against the (up to three) bilinear
 /// patches it crosses there. Works for rays going down (`d.z > 0`) and up (`d.z < 0`, shadow
 /// rays) and for wrapped and clamped edges.
@@ -30,8 +31,9 @@ pub(crate) struct ExactResult {
 /// the ray crosses a wall of the current cell, a texel boundary. The ray crosses each texel
 /// boundary once and the crossing moment of a wall is a fixed number, so advances are at most
 /// the boundaries crossed; a level is climbed only on an advance and the walk starts at most
-/// `top` levels up ([`start_level`]), so descents are at most the advances plus `top`. Callers reduce the entry point to its tile where
-/// the edges wrap, so the coordinates stay small and the f64 walls exact.
+/// `top` levels up ([`start_level`]), so descents are at most the advances plus `top`. Callers
+/// reduce the entry point to its tile where the edges wrap, so the coordinates stay small and the
+/// f64 walls exact.
 pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1: f64) -> ExactResult {
     let pyr = surface.pyramid();
     let f = surface.field();
@@ -87,6 +89,13 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
             t = t_exit;
             continue;
         }
+        if bound >= 1.0 && d.z > 0.0 {
+            // The least depth of the cell is the deepest a field holds, so the surface in it is
+            // the plane at depth 1 (a flat floor): going down, the ray meets it where it reaches
+            // depth 1, which is inside the cell (the ray reaches the bound by the exit). The
+            // descent to level 0 would find the same point after a fetch per level and a patch.
+            return ExactResult { t: Some(t.max((1.0 - o.z) / d.z).min(t_exit)), fetches };
+        }
         if level > 0 {
             // Going down, nothing is hit before the ray reaches the bound: jump there (never
             // past the cell, where the bound is known to be reached).
@@ -115,8 +124,8 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
 /// How many levels below the one whose cells are as wide as the ray's horizontal travel the
 /// walk starts: with `2^(k + START_BELOW)` texels of travel it starts at level `k`, cells of an
 /// eighth of the travel. Measured on the built-in maps at 60 to 85 degrees (docs/ACCURACY.md):
-/// starting at level 0 took 10% to 25% more fetches and steps, starting with cells of half the
-/// travel more again.
+/// starting at level 0 took 1% to 33% more fetches, starting with cells of half the travel more
+/// again.
 const START_BELOW: u32 = 3;
 
 /// The level [`exact_first_hit`] starts at for a ray with texel-space direction `d` over `t` in
@@ -135,8 +144,8 @@ pub(crate) fn start_level(d: DVec3, t0: f64, t1: f64, top: usize) -> usize {
 }
 
 /// The most steps [`exact_first_hit`] takes for a ray with texel-space direction `d` over
-/// `t` in `[t0, t1]` on a `w` x `h` field: `2 * (columns + rows) + 3 + top`, where `columns` bounds the
-/// texel boundaries `x = integer` the ray crosses (`floor(|d.x| (t1 - t0)) + 2`, one more than
+/// `t` in `[t0, t1]` on a `w` x `h` field: `2 * (columns + rows) + 3 + top`, where `columns`
+/// bounds the texel boundaries `x = integer` the ray crosses (`floor(|d.x| (t1 - t0)) + 2`, one more than
 /// exact arithmetic needs, for rounding; with clamped edges at most the `w - 1` interior
 /// boundaries, the border cells reaching to infinity) and `rows` likewise. See the proof on
 /// [`exact_first_hit`]: at most one advance per boundary crossed plus the last, and at most as

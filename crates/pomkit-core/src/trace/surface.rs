@@ -124,9 +124,9 @@ impl Surface {
     /// A ray's UV travel per unit of depth is at most `depth_scale / MIN_COS` (the flattest ray
     /// accepted), so it crosses at most `depth_scale / MIN_COS * width + 2` texel columns and as
     /// many rows (scaled by the height); the traversal makes at most
-    /// `2 * (columns + rows) + 3 + top` steps (`exact_step_bound`, `top` the pyramid's coarsest level) and at most 4 fetches per step
-    /// (one pyramid gather, up to three bilinear patches). This is a proof of termination, not
-    /// the typical cost: the pyramid skips empty stretches a tile at a time, so a typical ray
+    /// `2 * (columns + rows) + 3 + top` steps (`exact_step_bound`, `top` the pyramid's coarsest
+    /// level) and at most 4 fetches per step (one pyramid gather, up to three bilinear patches).
+    /// This is a proof of termination, not the typical cost: the pyramid skips empty stretches a tile at a time, so a typical ray
     /// makes O(log size) fetches per tile it crosses.
     #[must_use]
     pub fn exact_fetch_bound(&self) -> u32 {
