@@ -686,15 +686,17 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, sa
                 t = t_exit;
                 continue;
             }
+            // Going down, nothing is hit before the ray reaches the bound (used only when d.z > 0).
+            let t_bound = max(t, (bound - o.z) / d.z);
             if bound >= 1.0 && d.z > 0.0 {
                 // A flat floor: the cell's least depth is the deepest a map holds, so its
                 // surface is the plane at depth 1, which the ray meets inside the cell (trace.rs
                 // `exact_first_hit`, the same shortcut).
-                return PomkitWalk(min(max(t, (1.0 - o.z) / d.z), t_exit), state.fetches);
+                return PomkitWalk(min(t_bound, t_exit), state.fetches);
             }
             if level > 0u {
                 if d.z > 0.0 {
-                    t = max(t, (bound - o.z) / d.z);
+                    t = t_bound;
                 }
                 level -= 1u;
                 continue;

@@ -135,7 +135,7 @@ const START_BELOW: u32 = 3;
 /// of a power of two, which changes the fetches and steps, not the hit.
 pub(crate) fn start_level(d: DVec3, t0: f64, t1: f64, top: usize) -> usize {
     let travel = d.x.hypot(d.y) * (t1 - t0);
-    if !(travel >= f64::from(1u32 << START_BELOW)) {
+    if travel.is_nan() || travel < f64::from(1u32 << START_BELOW) {
         return 0;
     }
     // `as` saturates: a travel beyond u32 starts at the top anyway.
