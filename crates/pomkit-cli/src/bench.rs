@@ -30,7 +30,9 @@ technique in place of the materials' own (`material`: each material's own), at -
 GPU (pomkit-gpu, with --backend gpu, or auto when an adapter exists): per technique the scene is \
 prepared once (uploads, pipelines; not timed) and drawn once untimed (warm-up: shader \
 compilation, first-use allocations; its AOVs give the fetches), then drawn --gpu-runs more times. \
-Before each timed frame every height map is re-uploaded, as a dynamic height field would be, so \
+The timed frames take turns: every technique is prepared and warmed up first, then each round \
+draws one frame of each technique, so that a slow spell of a shared machine falls on all of them \
+alike. Before each timed frame every height map is re-uploaded, as a dynamic height field would be, so \
 the compute passes that rebuild its mips, normals, parallax map and maximum-height pyramid run \
 every frame. The render pass (every object, every pixel traced, shadowed and shaded) and the \
 compute passes are timed apart with GPU timestamp queries when the adapter has them (else with \
@@ -41,7 +43,8 @@ reported too. On a software adapter (lavapipe, llvmpipe, WARP) GPU times are CPU
 CPU (pomkit-cpu, on all cores with rayon): per technique one untimed warm-up frame with the AOVs \
 on (its fetches), then --cpu-runs frames timed with std::time::Instant around the whole render \
 call: preparing the materials (tracing pyramids, baked normal maps, albedo mips), the vertex stage \
-and triangle setup, shading, and the resolve. Generating the scene's textures is not timed. \
+and triangle setup, shading, and the resolve; the techniques take turns as on the GPU. Generating \
+the scene's textures is not timed. \
 median_ms is the median of those frames, mpix_per_s is width * height / median.
 
 Every figure is a median over the timed frames. gpu_over_cpu is the GPU render pass's median over \
@@ -220,19 +223,25 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     eprintln!("generating the demo scene (not timed)");
     let scene = pomkit_core::demo::demo_scene();
     let base = RenderOptions { width: w, height: h, ..Default::default() };
-    let mut rows = Vec::new();
-    for (name, mode) in &modes {
-        let opts = RenderOptions { mode: *mode, ..base };
-        let gpu_stats = match gpu.as_deref_mut() {
-            Some(g) => Some(gpu_frames(g, &scene, &opts, name, gpu_runs)?),
-            None => None,
-        };
-        let cpu_stats = if cpu_runs > 0 { Some(cpu_frames(&scene, &opts, name, cpu_runs)?) } else { None };
-        rows.push(Row { name: name.clone(), cpu: cpu_stats, gpu: gpu_stats });
-    }
+    let techniques: Vec<(&str, RenderOptions)> =
+        modes.iter().map(|(name, mode)| (name.as_str(), RenderOptions { mode: *mode, ..base })).collect();
+    let gpu_stats: Vec<Option<GpuStats>> = match gpu.as_deref_mut() {
+        Some(g) => gpu_frames(g, &scene, &techniques, gpu_runs)?.into_iter().map(Some).collect(),
+        None => techniques.iter().map(|_| None).collect(),
+    };
+    let cpu_stats: Vec<Option<CpuStats>> = if cpu_runs > 0 {
+        cpu_frames(&scene, &techniques, cpu_runs)?.into_iter().map(Some).collect()
+    } else {
+        techniques.iter().map(|_| None).collect()
+    };
+    let mut rows: Vec<Row> = modes
+        .iter()
+        .zip(gpu_stats.into_iter().zip(cpu_stats))
+        .map(|((name, _), (gpu, cpu))| Row { name: name.clone(), cpu, gpu })
+        .collect();
     if a.displaced {
         let opts = RenderOptions { mode: Mode::Displaced, ..base };
-        let cpu = cpu_frames(&scene, &opts, "displaced", cpu_runs)?;
+        let cpu = cpu_frames(&scene, &[("displaced", opts)], cpu_runs)?.remove(0);
         rows.push(Row { name: "displaced".into(), cpu: Some(cpu), gpu: None });
     }
     let caption = caption(a, w, h, gpu.as_deref(), gpu_runs, cpu_runs, skipped.as_deref(), &rows);
@@ -269,14 +278,16 @@ fn caption(
         let software = if g.context().is_software() { ", a software adapter: its times are CPU times" } else { "" };
         parts.push(format!(
             "GPU: {}{software}; median of {gpu_runs} frame(s) per technique, drawn after one warm-up from one \
-             prepared scene, height maps rebuilt every frame; {timer}.",
+             prepared scene, the techniques taking turns frame by frame, height maps rebuilt every frame; \
+             {timer}.",
             g.context().describe()
         ));
     }
     if cpu_runs > 0 {
         parts.push(format!(
             "CPU: pomkit-cpu on {} thread(s), shading packets of 8 fragments with {} SIMD (CPU features: {}); \
-             median of {cpu_runs} frame(s) per technique after one warm-up, whole render call{}.",
+             median of {cpu_runs} frame(s) per technique after one warm-up, the techniques taking turns frame \
+             by frame, whole render call{}.",
             rayon::current_num_threads(),
             pomkit_cpu::Simd8::from_env().unwrap_or_else(|_| pomkit_cpu::Simd8::detect()).name(),
             pomkit_cpu::cpu_features(),
@@ -293,49 +304,79 @@ fn caption(
     parts.join(" ")
 }
 
-/// Times `runs` GPU frames of `opts` after a warm-up (docs/BENCHMARKS.md: prepare once, draw
-/// repeatedly), reporting each on standard error.
-fn gpu_frames(gpu: &mut GpuRenderer, scene: &Scene, opts: &RenderOptions, name: &str, runs: u32) -> Result<GpuStats> {
-    let fail = || format!("cannot render ({name}) on the GPU");
-    let start = Instant::now();
-    // The GPU renderer always draws its AOVs; `aovs` only keeps them in the output.
-    let mut prepared = gpu.prepare(scene, &RenderOptions { aovs: true, ..*opts }).with_context(fail)?;
-    eprintln!("{name}: gpu prepare (uploads, pipelines): {:.1} ms", ms(start.elapsed()));
-    let warm = gpu.draw(&mut prepared, scene).with_context(fail)?;
-    report_gpu(gpu, &format!("{name}: gpu warm-up"));
-    let fetches = fetches_per_covered_pixel(&warm);
+/// Times `runs` GPU frames of each technique after a warm-up (docs/BENCHMARKS.md: prepare once,
+/// draw repeatedly), reporting each on standard error. Every technique is prepared and warmed up
+/// first; then the timed frames take turns, one of each technique per round, so that a slow spell
+/// of a shared machine falls on every technique alike and their ratios stay steady.
+fn gpu_frames(
+    gpu: &mut GpuRenderer,
+    scene: &Scene,
+    techniques: &[(&str, RenderOptions)],
+    runs: u32,
+) -> Result<Vec<GpuStats>> {
+    let mut timed = Vec::with_capacity(techniques.len());
+    for &(name, opts) in techniques {
+        let start = Instant::now();
+        // The GPU renderer always draws its AOVs; `aovs` only keeps them in the output.
+        let mut prepared =
+            gpu.prepare(scene, &RenderOptions { aovs: true, ..opts }).with_context(|| gpu_failed(name))?;
+        eprintln!("{name}: gpu prepare (uploads, pipelines): {:.1} ms", ms(start.elapsed()));
+        let warm = gpu.draw(&mut prepared, scene).with_context(|| gpu_failed(name))?;
+        report_gpu(gpu, &format!("{name}: gpu warm-up"));
+        let fetches = fetches_per_covered_pixel(&warm);
+        timed.push((name, opts, prepared, fetches, GpuTimes::default()));
+    }
     let heights: Vec<_> =
         scene.materials.iter().enumerate().filter_map(|(i, m)| m.height.as_ref().map(|f| (i, f))).collect();
-    let (mut pass, mut height, mut wall, mut stamped) = (Vec::new(), Vec::new(), Vec::new(), true);
     for i in 0..runs {
-        for (index, field) in &heights {
-            prepared.set_height(gpu.context(), *index, field).with_context(fail)?;
-            // set_height removes the cones (they described the old heights): give them back,
-            // as a program with a changing field and CPU-built cones would, so that `cone` is
-            // timed on its cones, not on exact's walk.
-            let m = &scene.materials[*index];
-            if opts.mode.technique(m.technique) == Technique::Cone {
-                prepared.set_cones(gpu.context(), *index, m.cones_to_trace().as_deref()).with_context(fail)?;
+        for (name, opts, prepared, _, times) in &mut timed {
+            let fail = || gpu_failed(name);
+            for (index, field) in &heights {
+                prepared.set_height(gpu.context(), *index, field).with_context(fail)?;
+                // set_height removes the cones (they described the old heights): give them
+                // back, as a program with a changing field and CPU-built cones would, so that
+                // `cone` is timed on its cones, not on exact's walk.
+                let m = &scene.materials[*index];
+                if opts.mode.technique(m.technique) == Technique::Cone {
+                    prepared.set_cones(gpu.context(), *index, m.cones_to_trace().as_deref()).with_context(fail)?;
+                }
             }
+            let out = gpu.draw(prepared, scene).with_context(fail)?;
+            if out.color.iter().any(|c| !c.is_finite()) {
+                bail!("internal error: the GPU render ({name}) produced a non-finite pixel");
+            }
+            let t = report_gpu(gpu, &format!("{name}: gpu run {}/{runs}", i + 1));
+            times.pass.push(t.render_pass_ms);
+            times.height.push(t.height_passes_ms);
+            times.wall.push(t.wall_ms);
+            times.untimed |= !t.from_timestamps;
         }
-        let out = gpu.draw(&mut prepared, scene).with_context(fail)?;
-        if out.color.iter().any(|c| !c.is_finite()) {
-            bail!("internal error: the GPU render ({name}) produced a non-finite pixel");
-        }
-        let t = report_gpu(gpu, &format!("{name}: gpu run {}/{runs}", i + 1));
-        pass.push(t.render_pass_ms);
-        height.push(t.height_passes_ms);
-        wall.push(t.wall_ms);
-        stamped &= t.from_timestamps;
     }
-    Ok(GpuStats {
-        runs,
-        render_pass_ms: median_f64(&mut pass),
-        height_passes_ms: median_f64(&mut height),
-        wall_ms: median_f64(&mut wall),
-        from_timestamps: stamped,
-        fetches_per_pixel: fetches,
-    })
+    Ok(timed
+        .into_iter()
+        .map(|(_, _, _, fetches, mut t)| GpuStats {
+            runs,
+            render_pass_ms: median_f64(&mut t.pass),
+            height_passes_ms: median_f64(&mut t.height),
+            wall_ms: median_f64(&mut t.wall),
+            from_timestamps: !t.untimed,
+            fetches_per_pixel: fetches,
+        })
+        .collect())
+}
+
+/// One technique's GPU frame times, gathered round by round.
+#[derive(Default)]
+struct GpuTimes {
+    pass: Vec<f64>,
+    height: Vec<f64>,
+    wall: Vec<f64>,
+    /// Some frame was timed with the wall clock, not timestamp queries.
+    untimed: bool,
+}
+
+fn gpu_failed(name: &str) -> String {
+    format!("cannot render ({name}) on the GPU")
 }
 
 /// Prints the last GPU frame's times, labelled `what`, and returns them.
@@ -349,29 +390,38 @@ fn report_gpu(gpu: &GpuRenderer, what: &str) -> pomkit_gpu::Timings {
     t
 }
 
-/// Times `runs` CPU frames of `opts` after a warm-up with the AOVs on (which gives the fetches).
-/// One renderer draws them all, as one GPU renderer draws the GPU's: it keeps the albedo mip
+/// Times `runs` CPU frames of each technique after a warm-up with the AOVs on (which gives the
+/// fetches), the techniques taking turns as on the GPU ([`gpu_frames`]). One renderer per
+/// technique draws its frames, as one GPU renderer draws the GPU's: it keeps the albedo mip
 /// chains from frame to frame (the GPU keeps its uploaded textures), while everything made
 /// from the height maps is made again in every frame on both.
-fn cpu_frames(scene: &Scene, opts: &RenderOptions, name: &str, runs: u32) -> Result<CpuStats> {
-    let mut renderer = CpuRenderer::new();
-    let warm =
-        frame(&mut renderer, scene, &RenderOptions { aovs: true, ..*opts }, &format!("{name}: warm-up with AOVs"))?;
-    let fetches = fetches_per_covered_pixel(&warm.out);
-    let mut times = Vec::new();
-    let mut setups = Vec::new();
-    for i in 0..runs {
-        let f = frame(&mut renderer, scene, opts, &format!("{name}: run {}/{runs}", i + 1))?;
-        times.push(f.time);
-        setups.push(f.setup);
+fn cpu_frames(scene: &Scene, techniques: &[(&str, RenderOptions)], runs: u32) -> Result<Vec<CpuStats>> {
+    let mut timed = Vec::with_capacity(techniques.len());
+    for &(name, opts) in techniques {
+        let mut renderer = CpuRenderer::new();
+        let warm =
+            frame(&mut renderer, scene, &RenderOptions { aovs: true, ..opts }, &format!("{name}: warm-up with AOVs"))?;
+        timed.push((name, opts, renderer, fetches_per_covered_pixel(&warm.out), Vec::new(), Vec::new()));
     }
-    let med = median(&mut times);
-    eprintln!(
-        "{name}: median {:.1} ms, of which setup (until the first tile) {:.1} ms",
-        ms(med),
-        ms(median(&mut setups))
-    );
-    Ok(cpu_stats(runs, med, opts.width, opts.height, fetches))
+    for i in 0..runs {
+        for (name, opts, renderer, _, times, setups) in &mut timed {
+            let f = frame(renderer, scene, opts, &format!("{name}: run {}/{runs}", i + 1))?;
+            times.push(f.time);
+            setups.push(f.setup);
+        }
+    }
+    Ok(timed
+        .into_iter()
+        .map(|(name, opts, _, fetches, mut times, mut setups)| {
+            let med = median(&mut times);
+            eprintln!(
+                "{name}: median {:.1} ms, of which setup (until the first tile) {:.1} ms",
+                ms(med),
+                ms(median(&mut setups))
+            );
+            cpu_stats(runs, med, opts.width, opts.height, fetches)
+        })
+        .collect())
 }
 
 /// A timed frame.

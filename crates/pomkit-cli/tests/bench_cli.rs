@@ -149,6 +149,32 @@ fn markdown_is_the_default_and_progress_goes_to_stderr() {
     assert!(stderr(&out).contains("pom: run 2/2"), "{}", stderr(&out));
 }
 
+/// Where each of `needles` first appears in `text`, in order; panics naming a missing one.
+fn positions(text: &str, needles: &[&str]) -> Vec<usize> {
+    needles.iter().map(|n| text.find(n).unwrap_or_else(|| panic!("'{n}' missing from:\n{text}"))).collect()
+}
+
+#[test]
+fn the_techniques_take_turns_frame_by_frame() {
+    // A slow spell of a shared machine should fall on every technique alike: the second frame
+    // of any technique comes after the first frame of every other.
+    let out = pomkit_cpu(&["--size", "32x18", "--runs", "2", "--techniques", "pom,normal"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let at = positions(&stderr(&out), &["pom: run 1/2", "normal: run 1/2", "pom: run 2/2", "normal: run 2/2"]);
+    assert!(at.is_sorted(), "frames out of turn ({at:?}):\n{}", stderr(&out));
+    let Some(out) =
+        pomkit_gpu(&["--size", "32x18", "--gpu-runs", "2", "--cpu-runs", "0", "--techniques", "pom,normal"])
+    else {
+        return;
+    };
+    assert!(out.status.success(), "{}", stderr(&out));
+    let at = positions(
+        &stderr(&out),
+        &["pom: gpu warm-up", "normal: gpu warm-up", "pom: gpu run 1/2", "normal: gpu run 1/2", "pom: gpu run 2/2"],
+    );
+    assert!(at.is_sorted(), "GPU frames out of turn ({at:?}):\n{}", stderr(&out));
+}
+
 #[test]
 fn help_says_what_is_measured() {
     let out = pomkit(&["bench", "--help"]);
