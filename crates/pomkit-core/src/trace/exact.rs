@@ -145,9 +145,9 @@ pub(crate) fn start_level(d: DVec3, t0: f64, t1: f64, top: usize) -> usize {
 
 /// The most steps [`exact_first_hit`] takes for a ray with texel-space direction `d` over
 /// `t` in `[t0, t1]` on a `w` x `h` field: `2 * (columns + rows) + 3 + top`, where `columns`
-/// bounds the texel boundaries `x = integer` the ray crosses (`floor(|d.x| (t1 - t0)) + 2`, one more than
-/// exact arithmetic needs, for rounding; with clamped edges at most the `w - 1` interior
-/// boundaries, the border cells reaching to infinity) and `rows` likewise. See the proof on
+/// bounds the texel boundaries `x = integer` the ray crosses (`floor(|d.x| (t1 - t0)) + 2`, one
+/// more than exact arithmetic needs, for rounding; with clamped edges at most the `w - 1`
+/// interior boundaries, the border cells reaching to infinity) and `rows` likewise. See the proof on
 /// [`exact_first_hit`]: at most one advance per boundary crossed plus the last, and at most as
 /// many descents as advances plus the start level, which is at most `top`, the pyramid's
 /// coarsest level, `ceil(log2(max(w, h)))`. Saturates at `u64::MAX`.
