@@ -32,8 +32,8 @@ prepared once (uploads, pipelines; not timed) and drawn once untimed (warm-up: s
 compilation, first-use allocations; its AOVs give the fetches), then drawn --gpu-runs more times. \
 The timed frames take turns: every technique is prepared and warmed up first, then each round \
 draws one frame of each technique, so that a slow spell of a shared machine falls on all of them \
-alike. Before each timed frame every height map is re-uploaded, as a dynamic height field would be, so \
-the compute passes that rebuild its mips, normals, parallax map and maximum-height pyramid run \
+alike. Before each timed frame every height map is re-uploaded, as a dynamic height field would \
+be, so the compute passes that rebuild its mips, normals, parallax map and maximum-height pyramid run \
 every frame. The render pass (every object, every pixel traced, shadowed and shaded) and the \
 compute passes are timed apart with GPU timestamp queries when the adapter has them (else with \
 the wall clock around submit-and-wait, which includes driver overhead: the table says which). \
