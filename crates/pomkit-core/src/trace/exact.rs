@@ -402,3 +402,6 @@ fn patch_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: 
     // it is at or below the surface.
     (if g(tb) >= 0.0 { Some(tb) } else { None }, key)
 }
+
+#[cfg(test)]
+mod affine_bounds;
