@@ -48,6 +48,8 @@ struct Plane {
     gy: f64,
     below: f64,
     above: f64,
+    /// The greatest depth of the surface over the cell.
+    max: f64,
 }
 
 /// The planes of every level of a pyramid, cell by cell.
@@ -73,8 +75,14 @@ fn grid(a: u32, b: u32) -> Vec<f64> {
 }
 
 impl Planes {
-    fn new(pyr: &MaxHeightPyramid, f: &HeightField, edges: EdgeMode) -> Self {
+    /// Planes at levels up to `tilted_up_to`, level planes (`gx = gy = 0`) above; with
+    /// `half_slopes` the slopes are rounded to an f16's 11 significant bits first, as a GPU
+    /// texel would store them (the widths are then those of the rounded plane).
+    fn new(pyr: &MaxHeightPyramid, f: &HeightField, edges: EdgeMode, tilted_up_to: usize, half_slopes: bool) -> Self {
         let clamp = edges == EdgeMode::Clamp;
+        // Round to 10 stored mantissa bits (f16's, for slopes in its normal range).
+        let half =
+            |g: f64| if half_slopes { f64::from(f32::from_bits(((g as f32).to_bits() + 0x1000) & !0x1fff)) } else { g };
         let levels = (0..pyr.len())
             .map(|level| {
                 let (nw, nh) = pyr.level_size(level);
@@ -99,24 +107,161 @@ impl Planes {
                         let p = sum / n;
                         let border_x = clamp && (ix == 0 || ix + 1 == nw);
                         let border_y = clamp && (iy == 0 || iy + 1 == nh);
-                        let gx = if xx > 0.0 && !border_x { sx / xx } else { 0.0 };
-                        let gy = if yy > 0.0 && !border_y { sy / yy } else { 0.0 };
-                        let (mut below, mut above) = (0.0f64, 0.0f64);
+                        let tilted = level <= tilted_up_to;
+                        let gx = half(if xx > 0.0 && !border_x && tilted { sx / xx } else { 0.0 });
+                        let gy = half(if yy > 0.0 && !border_y && tilted { sy / yy } else { 0.0 });
+                        let (mut below, mut above, mut max) = (0.0f64, 0.0f64, 0.0f64);
                         let xs = grid(x0, x1);
                         for y in grid(y0, y1) {
                             for &x in &xs {
-                                let r = bilinear(f, edges, x, y) - (p + gx * (x - cx) + gy * (y - cy));
+                                let depth = bilinear(f, edges, x, y);
+                                max = max.max(depth);
+                                let r = depth - (p + gx * (x - cx) + gy * (y - cy));
                                 below = below.max(-r);
                                 above = above.max(r);
                             }
                         }
-                        cells.push(Plane { p, gx, gy, below: below + PAD, above: above + PAD });
+                        cells.push(Plane { p, gx, gy, below: below + PAD, above: above + PAD, max });
                     }
                 }
                 (nw, cells)
             })
             .collect();
         Self { levels }
+    }
+
+    /// The same planes (least squares over the texel centres, from the children's sums), with
+    /// widths bounded from the children's instead of measured over the texels: a child's plane
+    /// and widths bound the surface over the child, and the parent's plane differs from the
+    /// child's by an affine function, extreme at the child's corners. Wider than [`Planes::new`]'s,
+    /// but a level costs one pass over its cells, reading four children each, as a GPU's
+    /// pyramid pass does.
+    fn hierarchical(pyr: &MaxHeightPyramid, f: &HeightField, edges: EdgeMode) -> Self {
+        let clamp = edges == EdgeMode::Clamp;
+        // Per cell: the plane, and the sums n, sum v, sum (x - cx) v, sum (y - cy) v,
+        // sum (x - cx)^2, sum (y - cy)^2 over its texel centres.
+        let mut levels: Vec<(u32, Vec<Plane>)> = Vec::new();
+        let mut sums: Vec<[f64; 6]> = Vec::new();
+        for level in 0..pyr.len() {
+            let (nw, nh) = pyr.level_size(level);
+            let mut cells = Vec::with_capacity((nw * nh) as usize);
+            let mut next = Vec::with_capacity((nw * nh) as usize);
+            for iy in 0..nh {
+                for ix in 0..nw {
+                    let ([x0, x1], [y0, y1]) = pyr.cell_texels(level, ix, iy);
+                    let (cx, cy) = (0.5 * f64::from(x0 + x1), 0.5 * f64::from(y0 + y1));
+                    let border_x = clamp && (ix == 0 || ix + 1 == nw);
+                    let border_y = clamp && (iy == 0 || iy + 1 == nh);
+                    if level == 0 {
+                        let (i, j) = (i64::from(ix), i64::from(iy));
+                        let v = |a: i64, b: i64| f64::from(f.depth_at(a, b, edges));
+                        let p = v(i, j);
+                        let gx = if border_x { 0.0 } else { 0.5 * (v(i + 1, j) - v(i - 1, j)) };
+                        let gy = if border_y { 0.0 } else { 0.5 * (v(i, j + 1) - v(i, j - 1)) };
+                        let (mut below, mut above, mut max) = (0.0f64, 0.0f64, 0.0f64);
+                        for y in grid(y0, y1) {
+                            for x in grid(x0, x1) {
+                                let depth = bilinear(f, edges, x, y);
+                                max = max.max(depth);
+                                let r = depth - (p + gx * (x - cx) + gy * (y - cy));
+                                below = below.max(-r);
+                                above = above.max(r);
+                            }
+                        }
+                        cells.push(Plane { p, gx, gy, below, above, max });
+                        next.push([1.0, p, 0.0, 0.0, 0.0, 0.0]);
+                        continue;
+                    }
+                    let (cw, _) = pyr.level_size(level - 1);
+                    let children: Vec<(u32, u32)> = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                        .into_iter()
+                        .map(|(a, b)| (2 * ix + a, 2 * iy + b))
+                        .filter(|&(a, b)| {
+                            let ([c0, c1], [d0, d1]) = pyr.cell_texels(level - 1, a, b);
+                            c0 < c1 && d0 < d1
+                        })
+                        .collect();
+                    let mut m = [0.0f64; 6];
+                    for &(a, b) in &children {
+                        let ([c0, c1], [d0, d1]) = pyr.cell_texels(level - 1, a, b);
+                        let (ccx, ccy) = (0.5 * f64::from(c0 + c1), 0.5 * f64::from(d0 + d1));
+                        let c = sums[(b * cw + a) as usize];
+                        let (dx, dy) = (ccx - cx, ccy - cy);
+                        m[0] += c[0];
+                        m[1] += c[1];
+                        m[2] += c[2] + dx * c[1];
+                        m[3] += c[3] + dy * c[1];
+                        m[4] += c[4] + c[0] * dx * dx;
+                        m[5] += c[5] + c[0] * dy * dy;
+                    }
+                    let p = m[1] / m[0];
+                    let gx = if m[4] > 0.0 && !border_x { m[2] / m[4] } else { 0.0 };
+                    let gy = if m[5] > 0.0 && !border_y { m[3] / m[5] } else { 0.0 };
+                    let (mut below, mut above, mut max) = (0.0f64, 0.0f64, 0.0f64);
+                    let (prev_w, prev) = &levels[level - 1];
+                    for &(a, b) in &children {
+                        let ([c0, c1], [d0, d1]) = pyr.cell_texels(level - 1, a, b);
+                        let (ccx, ccy) = (0.5 * f64::from(c0 + c1), 0.5 * f64::from(d0 + d1));
+                        let child = prev[(b * prev_w + a) as usize];
+                        max = max.max(child.max);
+                        for (x, y) in [(c0, d0), (c1, d0), (c0, d1), (c1, d1)] {
+                            let (x, y) = (f64::from(x), f64::from(y));
+                            let parent = p + gx * (x - cx) + gy * (y - cy);
+                            let own = child.p + child.gx * (x - ccx) + child.gy * (y - ccy);
+                            below = below.max(parent - own + child.below);
+                            above = above.max(own - parent + child.above);
+                        }
+                    }
+                    cells.push(Plane { p, gx, gy, below, above, max });
+                    next.push(m);
+                }
+            }
+            levels.push((nw, cells));
+            sums = next;
+        }
+        for (_, cells) in &mut levels {
+            for c in cells {
+                c.below += PAD;
+                c.above += PAD;
+            }
+        }
+        Self { levels }
+    }
+
+    /// Replaces the widths of the levels above `up_to` by bounds from their children's planes
+    /// and widths, as [`Planes::hierarchical`] forms them (the planes stay): what a GPU pass
+    /// per level could compute above the levels it measures texel by texel.
+    fn widths_from_children_above(mut self, pyr: &MaxHeightPyramid, up_to: usize) -> Self {
+        for level in (up_to + 1)..pyr.len() {
+            let (nw, nh) = pyr.level_size(level);
+            let (cw, _) = pyr.level_size(level - 1);
+            for iy in 0..nh {
+                for ix in 0..nw {
+                    let ([x0, x1], [y0, y1]) = pyr.cell_texels(level, ix, iy);
+                    let (cx, cy) = (0.5 * f64::from(x0 + x1), 0.5 * f64::from(y0 + y1));
+                    let parent = self.get(level, ix, iy);
+                    let (mut below, mut above, mut max) = (0.0f64, 0.0f64, 0.0f64);
+                    for (a, b) in [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(a, b)| (2 * ix + a, 2 * iy + b)) {
+                        let ([c0, c1], [d0, d1]) = pyr.cell_texels(level - 1, a, b);
+                        if c0 >= c1 || d0 >= d1 {
+                            continue;
+                        }
+                        let (ccx, ccy) = (0.5 * f64::from(c0 + c1), 0.5 * f64::from(d0 + d1));
+                        let child = self.levels[level - 1].1[(b * cw + a) as usize];
+                        max = max.max(child.max);
+                        for (x, y) in [(c0, d0), (c1, d0), (c0, d1), (c1, d1)] {
+                            let (x, y) = (f64::from(x), f64::from(y));
+                            let theirs = parent.p + parent.gx * (x - cx) + parent.gy * (y - cy);
+                            let own = child.p + child.gx * (x - ccx) + child.gy * (y - ccy);
+                            below = below.max(theirs - own + child.below);
+                            above = above.max(own - theirs + child.above);
+                        }
+                    }
+                    self.levels[level].1[(iy * nw + ix) as usize] = Plane { below, above, max, ..parent };
+                }
+            }
+        }
+        self
     }
 
     fn get(&self, level: usize, ix: u32, iy: u32) -> Plane {
@@ -133,6 +278,10 @@ enum Layout {
     PlaneOnDemand,
     /// One texel per cell above level 0 holds both; sibling blocks at level 0.
     PerCell,
+    /// As `PerCell`, in four values with no separate least depth: the plane and its widths'
+    /// sum, or where the least and greatest depths are nearer each other than the widths'
+    /// sum, those (a level plane).
+    FourValues,
 }
 
 /// One variant of the walk.
@@ -187,13 +336,22 @@ fn affine_first_hit(
             break;
         }
         let Some((cell, probe, t_exit)) = entered_cell(pyr, level, o, d, t, t1, w, h, edges) else { break };
-        let per_cell = walk.layout == Layout::PerCell && level > 0;
+        let per_cell = walk.layout != Layout::PlaneOnDemand && level > 0;
         let key = if per_cell { (cell.x0 as i64, cell.y0 as i64) } else { block_key(&cell, level, edges) };
         if read[level.min(33)] != Some(key) {
             read[level.min(33)] = Some(key);
             fetches += 1;
         }
-        let bound = f64::from(pyr.min_depth(level, cell.ix, cell.iy));
+        let mut bound = f64::from(pyr.min_depth(level, cell.ix, cell.iy));
+        let mut pl = planes.get(level, cell.ix, cell.iy);
+        if walk.layout == Layout::FourValues && level > 0 {
+            if pl.max - bound <= pl.below + pl.above {
+                pl = Plane { p: bound, gx: 0.0, gy: 0.0, below: 0.0, above: pl.max - bound, max: pl.max };
+            } else {
+                // The texel holds no least depth: only the plane bounds the cell.
+                bound = 0.0;
+            }
+        }
         let mut skip = o.z + d.z * t_exit < bound;
         let mut t_lo = t.max(((bound - o.z) / d.z).min(t_exit));
         let mut bracket: Option<f64> = None;
@@ -201,7 +359,6 @@ fn affine_first_hit(
             if !per_cell {
                 fetches += 1;
             }
-            let pl = planes.get(level, cell.ix, cell.iy);
             // The plane's centre in the ray's unbounded coordinates (a clamped border cell's
             // plane is level along its infinite axis, where the centre does not matter).
             let centre = |lo: f64, hi: f64| if lo.is_finite() && hi.is_finite() { 0.5 * (lo + hi) } else { 0.0 };
@@ -291,6 +448,9 @@ fn affine_first_hit(
 /// starting two levels above `exact` but no higher than level 5.
 const PER_CELL: Walk = Walk { layout: Layout::PerCell, span: 3.0, start_up: 2, start_cap: 5 };
 
+/// [`PER_CELL`] in four values per texel.
+const FOUR_VALUES: Walk = Walk { layout: Layout::FourValues, ..PER_CELL };
+
 /// `exact`'s blocks with the plane read where the least depth does not skip, starting where
 /// `exact` starts.
 const ON_DEMAND: Walk = Walk { layout: Layout::PlaneOnDemand, span: 3.0, start_up: 0, start_cap: 99 };
@@ -334,10 +494,10 @@ fn the_affine_walk_finds_the_exact_hits() {
         for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
             let f = generate(pattern, 64, 64);
             let surface = Surface::new(f.clone(), edges, 0.1);
-            let planes = Planes::new(surface.pyramid(), &f, edges);
+            let planes = Planes::new(surface.pyramid(), &f, edges, usize::MAX, false);
             for angle in [45.0f32, 85.0] {
                 let rays = texel_rays(angle, 150, 64.0, 0.1);
-                let means = measure(&surface, &planes, &rays, &[PER_CELL, ON_DEMAND]);
+                let means = measure(&surface, &planes, &rays, &[PER_CELL, ON_DEMAND, FOUR_VALUES]);
                 assert!(means.iter().all(|m| *m > 0.0), "{} {angle}: no fetches counted", pattern.name());
             }
         }
@@ -345,23 +505,34 @@ fn the_affine_walk_finds_the_exact_hits() {
 }
 
 /// The table of docs/ACCURACY.md, "Affine bounds per cell": `cargo test --release -p
-/// pomkit-core --lib affine_bounds_fetch_table -- --ignored --nocapture` (`AFFINE_EDGES=clamp`
-/// for clamped edges).
+/// pomkit-core --lib affine_bounds_fetch_table -- --ignored --nocapture`. The variants the
+/// text reports: `AFFINE_EDGES=clamp` (clamped edges), `AFFINE_BUILD=hierarchical` (widths
+/// from the children's), `AFFINE_TILTED_UP_TO=5` (level planes above level 5),
+/// `AFFINE_HALF_SLOPES=1` (slopes rounded to f16), `AFFINE_EXACT_WIDTHS_UP_TO=5` (widths from
+/// the children's above level 5).
 #[test]
 #[ignore = "a measurement for docs/ACCURACY.md, under 10 s in release"]
 fn affine_bounds_fetch_table() {
     let edges =
         if std::env::var("AFFINE_EDGES").is_ok_and(|e| e == "clamp") { EdgeMode::Clamp } else { EdgeMode::Wrap };
-    println!("| map | angle | exact | plane on demand | plane per cell |");
-    println!("|---|--:|--:|--:|--:|");
+    println!("| map | angle | exact | plane on demand | plane per cell | four values |");
+    println!("|---|--:|--:|--:|--:|--:|");
     for pattern in Pattern::ALL {
         let f = generate(pattern, 512, 512);
         let surface = Surface::new(f.clone(), edges, 0.1);
-        let planes = Planes::new(surface.pyramid(), &f, edges);
+        let planes = if std::env::var("AFFINE_BUILD").is_ok_and(|b| b == "hierarchical") {
+            Planes::hierarchical(surface.pyramid(), &f, edges)
+        } else {
+            let tilted_up_to = std::env::var("AFFINE_TILTED_UP_TO").map_or(usize::MAX, |v| v.parse().expect("a level"));
+            let exact_up_to =
+                std::env::var("AFFINE_EXACT_WIDTHS_UP_TO").map_or(usize::MAX, |v| v.parse().expect("a level"));
+            Planes::new(surface.pyramid(), &f, edges, tilted_up_to, std::env::var("AFFINE_HALF_SLOPES").is_ok())
+                .widths_from_children_above(surface.pyramid(), exact_up_to)
+        };
         for angle in [60.0f32, 75.0, 85.0] {
             let rays = texel_rays(angle, 2000, 512.0, 0.1);
-            let m = measure(&surface, &planes, &rays, &[ON_DEMAND, PER_CELL]);
-            println!("| {} | {angle}° | {:.1} | {:.1} | {:.1} |", pattern.name(), m[0], m[1], m[2]);
+            let m = measure(&surface, &planes, &rays, &[ON_DEMAND, PER_CELL, FOUR_VALUES]);
+            println!("| {} | {angle}° | {:.1} | {:.1} | {:.1} | {:.1} |", pattern.name(), m[0], m[1], m[2], m[3]);
         }
     }
 }
