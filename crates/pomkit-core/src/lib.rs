@@ -45,6 +45,7 @@ pub mod memory;
 pub mod mesh;
 mod modes;
 pub mod params;
+pub mod planes;
 pub mod procedural;
 pub mod pyramid;
 pub mod render;
