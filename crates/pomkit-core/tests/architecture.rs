@@ -61,6 +61,11 @@ fn code_lines(text: &str) -> Vec<String> {
                 let n = next.trim_start();
                 n.starts_with("mod ") || n.starts_with("pub(crate) mod ") || n.starts_with("pub mod ")
             });
+        if opens_test_module && lines.peek().is_some_and(|next| next.trim_end().ends_with(';')) {
+            // A test module in a file of its own (`test_only_files` leaves the file out).
+            lines.next();
+            continue;
+        }
         if opens_test_module {
             // Skip to the brace that closes the module.
             let mut depth = 0i64;
@@ -88,6 +93,38 @@ fn code_lines(text: &str) -> Vec<String> {
         // A comment at the end of a line of code.
         out.push(line.split(" // ").next().unwrap_or(line).to_owned());
     }
+    out
+}
+
+/// The files under `src` that hold test modules declared in a file of their own
+/// (`#[cfg(test)]` then `mod name;`), and the files under them: test code, like the inline
+/// `#[cfg(test)]` modules `code_lines` leaves out.
+fn test_only_files(src: &Path) -> BTreeSet<PathBuf> {
+    let mut files = Vec::new();
+    sources(src, &mut files);
+    let mut test_dirs = Vec::new();
+    let mut out = BTreeSet::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).expect("source file");
+        let lines: Vec<&str> = text.lines().map(str::trim).collect();
+        for pair in lines.windows(2) {
+            let Some(name) = pair[1].strip_prefix("mod ").and_then(|rest| rest.strip_suffix(';')) else { continue };
+            if pair[0] != "#[cfg(test)]" {
+                continue;
+            }
+            // A crate root or mod.rs declares its children beside it, another file in a folder
+            // of its own name.
+            let stem = f.file_stem().unwrap().to_string_lossy();
+            let dir = if matches!(&*stem, "lib" | "main" | "mod") {
+                f.parent().unwrap().to_path_buf()
+            } else {
+                f.parent().unwrap().join(&*stem)
+            };
+            out.insert(dir.join(format!("{name}.rs")));
+            test_dirs.push(dir.join(name));
+        }
+    }
+    out.extend(files.into_iter().filter(|f| test_dirs.iter().any(|d| f.starts_with(d))));
     out
 }
 
@@ -151,7 +188,8 @@ fn module_graph(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
     };
     let modules: BTreeSet<String> = files.iter().filter_map(|f| module_of(f)).collect();
     let mut graph: BTreeMap<String, BTreeSet<String>> = modules.iter().map(|m| (m.clone(), BTreeSet::new())).collect();
-    for f in &files {
+    let tests = test_only_files(&src);
+    for f in files.iter().filter(|f| !tests.contains(*f)) {
         let Some(module) = module_of(f) else { continue };
         let text = std::fs::read_to_string(f).expect("source file");
         let code = code_lines(&text).join("\n");
@@ -238,6 +276,14 @@ fn the_cycle_check_finds_a_cycle() {
     assert!(referenced_modules(group, &modules, false).len() == 2);
     let tested = "use crate::a::X;\n#[cfg(test)]\nmod tests {\n    use crate::b::Y;\n    fn f() { let s = \"{}\"; }\n}\n// crate::c::Z\n";
     assert_eq!(code_lines(tested).join("\n"), "use crate::a::X;");
+    let file_module = "use crate::a::X;\n#[cfg(test)]\nmod measured;\nuse crate::c::Z;\n";
+    assert_eq!(code_lines(file_module).join("\n"), "use crate::a::X;\nuse crate::c::Z;");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    assert!(
+        test_only_files(&src).contains(&src.join("trace/exact/affine_bounds.rs")),
+        "the test module in a file of its own was not found: {:?}",
+        test_only_files(&src)
+    );
     let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     graph.insert("a".into(), ["b".to_owned()].into());
     graph.insert("b".into(), ["c".to_owned()].into());
@@ -274,7 +320,8 @@ fn core_touches_the_environment_only_in_the_memory_budget_probe() {
     ];
     let mut found = Vec::new();
     let mut probe_reads = false;
-    for f in &files {
+    let tests = test_only_files(&src);
+    for f in files.iter().filter(|f| !tests.contains(*f)) {
         let text = std::fs::read_to_string(f).expect("source file");
         let code = code_lines(&text).join("\n");
         if f.ends_with("memory.rs") {
