@@ -485,7 +485,8 @@ fn absolutize(table: &mut Table, base: &Path) {
     }
     if let Some(ms) = table.get_mut("material").and_then(Value::as_array_mut) {
         for m in ms.iter_mut().filter_map(Value::as_table_mut) {
-            for key in ["albedo", "height", "normal", "folder"] {
+            // Every key that names a file (the loader's list, so a new one is not missed).
+            for key in pomkit_core::params::FILE_KEYS.into_iter().filter(|k| *k != "name") {
                 if let Some(v) = m.get_mut(key) {
                     fix(v);
                 }
@@ -581,11 +582,12 @@ mod tests {
     #[test]
     fn relative_paths_become_absolute_and_builtins_stay() {
         let text = DEFAULT_SCENE
-            .replace("albedo = \"builtin:bricks\"", "albedo = \"maps/a.png\"")
+            .replace("albedo = \"builtin:bricks\"", "albedo = \"maps/a.png\"\ncone_map = \"maps/a_cone.png\"")
             .replace("mesh = \"plane\"\nsize = 2.0", "mesh = \"models/statue.obj\"");
         let base = Path::new("/data/scenes");
         let doc = SceneDoc::from_text(&text, base).expect("parses");
         assert_eq!(doc.material_field("albedo").and_then(Value::as_str), Some("/data/scenes/maps/a.png"));
+        assert_eq!(doc.material_field("cone_map").and_then(Value::as_str), Some("/data/scenes/maps/a_cone.png"));
         assert_eq!(doc.material_field("height").and_then(Value::as_str), Some("builtin:bricks"));
         assert_eq!(doc.mesh(), "/data/scenes/models/statue.obj");
     }
