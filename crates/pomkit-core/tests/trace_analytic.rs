@@ -14,6 +14,15 @@ fn surface(f: HeightField, edges: EdgeMode) -> Surface {
     Surface::new(f, edges, 0.1)
 }
 
+/// `surface` twice: `exact`'s walk on the least depths alone, and with plane bounds
+/// (`Surface::use_plane_bounds`); the exact tests hold for both.
+fn both_walks(f: HeightField, edges: EdgeMode, depth_scale: f32) -> [Surface; 2] {
+    let plain = Surface::new(f, edges, depth_scale);
+    let mut planes = plain.clone();
+    planes.use_plane_bounds();
+    [plain, planes]
+}
+
 /// Texel distance between two UVs on an N x N field.
 fn texels(a: Vec2, b: Vec2) -> f32 {
     ((a - b) * N as f32).length()
@@ -51,17 +60,18 @@ fn analytic_fields() -> Vec<(&'static str, HeightField)> {
 fn exact_matches_brute_force_on_analytic_fields_at_every_angle() {
     for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
         for (name, f) in analytic_fields() {
-            let s = surface(f.clone(), edges);
-            for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
-                for ray in rays_over(24, angle, 7) {
-                    let hit = trace(&s, &ray, Technique::Exact, &TraceParams::default());
-                    let truth = brute_force(&f, edges, &ray, 0.1);
-                    let err = texels(hit.uv, on_ray(&ray, truth, 0.1));
-                    assert!(
-                        err < 1e-3,
-                        "{name} {edges:?} {angle}deg {ray:?}: exact depth {} vs brute {truth}: {err} texels",
-                        hit.depth
-                    );
+            for (walk, s) in both_walks(f.clone(), edges, 0.1).iter().enumerate() {
+                for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
+                    for ray in rays_over(24, angle, 7) {
+                        let hit = trace(s, &ray, Technique::Exact, &TraceParams::default());
+                        let truth = brute_force(&f, edges, &ray, 0.1);
+                        let err = texels(hit.uv, on_ray(&ray, truth, 0.1));
+                        assert!(
+                            err < 1e-3,
+                            "{name} {edges:?} walk {walk} {angle}deg {ray:?}: exact depth {} vs brute {truth}: {err} texels",
+                            hit.depth
+                        );
+                    }
                 }
             }
         }
@@ -100,7 +110,7 @@ fn flat_field_gives_each_technique_its_stated_error() {
 fn tilted_plane_is_found_exactly_by_linear_intersections() {
     // A plane in u: the bilinear surface equals it away from the wrap seam; use clamp.
     let f = HeightField::from_height_fn(N, N, |x, _| 0.1 + 0.8 * x as f32 / (N - 1) as f32);
-    let s = surface(f.clone(), EdgeMode::Clamp);
+    let [s, planes] = both_walks(f.clone(), EdgeMode::Clamp, 0.1);
     let p = TraceParams::default();
     for angle in [0.0f32, 30.0, 60.0] {
         for ray in rays_over(16, angle, 11) {
@@ -108,6 +118,10 @@ fn tilted_plane_is_found_exactly_by_linear_intersections() {
             let truth = on_ray(&ray, brute_force(&f, EdgeMode::Clamp, &ray, 0.1), 0.1);
             let exact = trace(&s, &ray, Technique::Exact, &p);
             assert!(texels(exact.uv, truth) < 1e-3);
+            // The field is its own plane in every cell: the plane walk brackets the hit at once.
+            let on_planes = trace(&planes, &ray, Technique::Exact, &p);
+            assert!(texels(on_planes.uv, truth) < 1e-3, "planes {angle} {ray:?}");
+            assert!(on_planes.fetches <= exact.fetches, "planes {angle} {ray:?}: {on_planes:?} vs {exact:?}");
             // Inside the texel-centre range the profile is linear: pom is exact there.
             let pom = trace(&s, &ray, Technique::Pom, &p);
             let inside = |uv: Vec2| uv.x > 0.5 / N as f32 && uv.x < 1.0 - 0.5 / N as f32;
@@ -141,7 +155,7 @@ fn sampling_techniques_stay_within_a_step_on_smooth_fields() {
 #[test]
 fn exact_finds_the_one_texel_spike_at_85_degrees_where_pom_misses() {
     let f = generate(Pattern::Spike, N, N);
-    let s = surface(f.clone(), EdgeMode::Wrap);
+    let [s, planes] = both_walks(f.clone(), EdgeMode::Wrap, 0.1);
     let p = TraceParams { min_samples: 32, max_samples: 32, ..TraceParams::default() };
     // The spike's centre is texel (32, 32): aim rays along +u to pass over it at depths around
     // a half, and count how many each technique sees.
@@ -156,6 +170,8 @@ fn exact_finds_the_one_texel_spike_at_85_degrees_where_pom_misses() {
         assert!(truth < 0.9, "the spike is in this ray's path (depth {truth})");
         let exact = trace(&s, &ray, Technique::Exact, &p);
         assert!(texels(exact.uv, on_ray(&ray, truth, 0.1)) < 1e-3);
+        let on_planes = trace(&planes, &ray, Technique::Exact, &p);
+        assert!(texels(on_planes.uv, on_ray(&ray, truth, 0.1)) < 1e-3, "planes {ray:?}");
         exact_hits += usize::from(exact.depth < 0.9);
         pom_hits += usize::from(trace(&s, &ray, Technique::Pom, &p).depth < 0.9);
     }
@@ -172,13 +188,15 @@ fn exact_ends_on_a_floor_at_depth_one_without_descending_to_its_patches() {
     let n = 512;
     let higher = 1.0 - 1.0 / 1024.0;
     for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
-        let floor = Surface::new(HeightField::constant(n, n, 1.0), edges, 0.1);
+        let [floor, floor_planes] = both_walks(HeightField::constant(n, n, 1.0), edges, 0.1);
         let raised = Surface::new(HeightField::constant(n, n, higher), edges, 0.1);
         for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
             for ray in rays_over(24, angle, 11) {
                 let p = TraceParams::default();
                 let (a, b) = (trace(&floor, &ray, Technique::Exact, &p), trace(&raised, &ray, Technique::Exact, &p));
-                for (hit, z) in [(a, 1.0f32), (b, higher)] {
+                // The plane walk takes the same shortcut (its fetches differ: it starts higher).
+                let c = trace(&floor_planes, &ray, Technique::Exact, &p);
+                for (hit, z) in [(a, 1.0f32), (b, higher), (c, 1.0)] {
                     let texels = ((hit.uv - on_ray(&ray, f64::from(z), 0.1)) * n as f32).length();
                     assert!((hit.depth - z).abs() < 1e-5 && texels < 1e-3, "{edges:?} {angle}deg {ray:?}: {hit:?}");
                 }
@@ -452,8 +470,9 @@ fn exact_handles_rays_along_texel_walls_and_through_corners() {
     // Rays entering exactly on texel boundaries and creeping along them (the walk's cell
     // choice on a wall), against the brute-force truth.
     let f = cobblestones();
-    for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
-        let s = surface(f.clone(), edges);
+    for (edges, s) in
+        [EdgeMode::Wrap, EdgeMode::Clamp].into_iter().flat_map(|e| both_walks(f.clone(), e, 0.1).map(|s| (e, s)))
+    {
         let p = TraceParams::default();
         for (uv, dir) in [
             (Vec2::new(0.3, 0.5), Vec3::new(0.5, -1e-7, -0.6)),
@@ -465,7 +484,11 @@ fn exact_handles_rays_along_texel_walls_and_through_corners() {
             let ray = Ray::new(uv, dir);
             let hit = trace(&s, &ray, Technique::Exact, &p);
             let truth = brute_force(&f, edges, &ray, 0.1);
-            assert!(texels(hit.uv, on_ray(&ray, truth, 0.1)) < 1e-3, "{edges:?} {ray:?}: {hit:?} vs depth {truth}");
+            let walk = if s.plane_bounds().is_some() { "planes" } else { "least depths" };
+            assert!(
+                texels(hit.uv, on_ray(&ray, truth, 0.1)) < 1e-3,
+                "{edges:?} {walk} {ray:?}: {hit:?} vs depth {truth}"
+            );
             assert!(hit.fetches <= Technique::Exact.fetch_bound(&p, &s));
         }
     }
@@ -557,13 +580,14 @@ fn exact_at_the_largest_depth_scale_still_matches_brute_force() {
     // The deepest relief accepted, at a grazing 85 degrees: the ray crosses about 180 tiles.
     let f = cobblestones();
     let depth = pomkit_core::trace::MAX_DEPTH_SCALE;
-    let s = Surface::new(f.clone(), EdgeMode::Wrap, depth);
     let p = TraceParams::default();
-    for ray in rays_over(3, 85.0, 13) {
-        let hit = trace(&s, &ray, Technique::Exact, &p);
-        let truth = brute_force(&f, EdgeMode::Wrap, &ray, f64::from(depth));
-        assert!((f64::from(hit.depth) - truth).abs() < 1e-5, "{ray:?}: {} vs {truth}", hit.depth);
-        assert!(hit.fetches <= Technique::Exact.fetch_bound(&p, &s));
+    for s in both_walks(f.clone(), EdgeMode::Wrap, depth) {
+        for ray in rays_over(3, 85.0, 13) {
+            let hit = trace(&s, &ray, Technique::Exact, &p);
+            let truth = brute_force(&f, EdgeMode::Wrap, &ray, f64::from(depth));
+            assert!((f64::from(hit.depth) - truth).abs() < 1e-5, "{ray:?}: {} vs {truth}", hit.depth);
+            assert!(hit.fetches <= Technique::Exact.fetch_bound(&p, &s));
+        }
     }
 }
 
@@ -593,13 +617,16 @@ proptest! {
     #[test]
     fn every_technique_and_shadow_mode_is_finite_and_within_its_fetch_bound(
         u in any_coordinate(), v in any_coordinate(), dir in any_direction(), light in any_direction(),
-        pattern in 0usize..4, wrap in any::<bool>(),
+        pattern in 0usize..4, wrap in any::<bool>(), planes in any::<bool>(),
         depth_scale in prop_oneof![0.001f32..0.5, Just(16.0f32), Just(1e30), Just(1e-30)],
         bias in prop_oneof![Just(1.0f32), Just(0.0), Just(-1.0), Just(1e30), 0.0f32..1.0],
     ) {
         let pattern = [Pattern::Cobblestones, Pattern::Spike, Pattern::Text, Pattern::Bricks][pattern];
         let edges = if wrap { EdgeMode::Wrap } else { EdgeMode::Clamp };
-        let s = Surface::new(generate(pattern, 24, 17), edges, depth_scale);
+        let mut s = Surface::new(generate(pattern, 24, 17), edges, depth_scale);
+        if planes {
+            s.use_plane_bounds();
+        }
         let p = TraceParams { perspective_bias: bias, ..Default::default() };
         let ray = Ray::new(Vec2::new(u, v), dir);
         // The light as a direction toward it: flip the view-style z so most rays go up.

@@ -25,6 +25,9 @@ pub(crate) struct ExactResult {
 /// patches it crosses there. Works for rays going down (`d.z > 0`) and up (`d.z < 0`, shadow
 /// rays) and for wrapped and clamped edges.
 ///
+/// Rays going down on a surface with plane bounds ([`Surface::use_plane_bounds`]) take the walk
+/// of [`plane_walk`] instead: the same hits, other fetches.
+///
 /// # Termination
 /// The loop runs at most [`exact_step_bound`] times. Each step either returns, stops, descends
 /// a level, or advances `t` strictly ([`entered_cell`] guarantees `t_exit > t`) to the moment
@@ -35,6 +38,11 @@ pub(crate) struct ExactResult {
 /// reduce the entry point to its tile where the edges wrap, so the coordinates stay small and the
 /// f64 walls exact.
 pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1: f64) -> ExactResult {
+    if d.z > 0.0
+        && let Some(planes) = surface.plane_bounds()
+    {
+        return plane_walk::planes_first_hit(surface, planes, o, d, t0, t1);
+    }
     let pyr = surface.pyramid();
     let f = surface.field();
     let (w, h) = (i64::from(f.width()), i64::from(f.height()));
@@ -402,6 +410,8 @@ fn patch_hit(f: &HeightField, edges: EdgeMode, o: DVec3, d: DVec3, ta: f64, tb: 
     // it is at or below the surface.
     (if g(tb) >= 0.0 { Some(tb) } else { None }, key)
 }
+
+mod plane_walk;
 
 #[cfg(test)]
 mod affine_bounds;

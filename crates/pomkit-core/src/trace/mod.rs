@@ -25,6 +25,7 @@ use crate::heightfield::{EdgeMode, HeightField, MipChain};
 pub use crate::modes::{
     MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MAX_SAMPLES, MIN_PERSPECTIVE_BIAS, Technique, UnknownTechnique,
 };
+use crate::planes::CellPlanes;
 use crate::pyramid::MaxHeightPyramid;
 
 mod cone;

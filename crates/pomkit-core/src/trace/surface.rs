@@ -16,6 +16,8 @@ pub struct Surface {
     pub(super) depth_scale: f32,
     /// The cone map of `cone`, built on first use or set by [`Surface::set_cones`].
     cones: std::sync::OnceLock<std::sync::Arc<ConeMap>>,
+    /// The plane bounds `exact`'s view rays walk on, when [`Surface::use_plane_bounds`] set them.
+    planes: Option<std::sync::Arc<CellPlanes>>,
 }
 
 impl Surface {
@@ -35,6 +37,7 @@ impl Surface {
             edges,
             depth_scale: sanitized_depth_scale(depth_scale),
             cones: std::sync::OnceLock::new(),
+            planes: None,
         }
     }
 
@@ -72,6 +75,23 @@ impl Surface {
         cones.check_size(self.field().width(), self.field().height())?;
         self.cones = std::sync::OnceLock::from(cones);
         Ok(())
+    }
+
+    /// Builds the plane bounds of every pyramid cell ([`CellPlanes`]) and from then on walks
+    /// `exact`'s rays going down (view rays, and silhouette rays on their way in) on them: the
+    /// same hits, with fewer fetches where the relief slopes across the cells, more where rays
+    /// cross long runs of empty cells between thin features (docs/ACCURACY.md, "Affine bounds
+    /// per cell"). Shadow rays keep the least-depth walk. About five times the pyramid's build
+    /// (docs/BENCHMARKS.md).
+    pub fn use_plane_bounds(&mut self) {
+        let planes = CellPlanes::new(self.field(), self.pyramid(), self.edges);
+        self.planes = Some(std::sync::Arc::new(planes));
+    }
+
+    /// The plane bounds [`Surface::use_plane_bounds`] built, if it was called.
+    #[must_use]
+    pub fn plane_bounds(&self) -> Option<&CellPlanes> {
+        self.planes.as_deref()
     }
 
     /// The height field (mip 0).

@@ -294,10 +294,14 @@ fn texel_rays(angle: f32, count: usize, seed: u64, size: f64, depth_scale: f32) 
 /// exact one (to 1e-5 texel: the two solve a patch from different starts, which moves the
 /// root by rounding).
 fn measure(surface: &Surface, bounds: &Bounds, rays: &[(DVec3, DVec3)], walks: &[Walk]) -> Vec<f64> {
-    let mut sums = vec![0.0; walks.len() + 1];
+    let mut sums = vec![0.0; walks.len() + 2];
     for &(o, d) in rays {
         let e = exact_first_hit(surface, o, d, 0.0, 1.0);
         sums[0] += f64::from(e.fetches);
+        let tracer = super::plane_walk::planes_first_hit(surface, &bounds.planes, o, d, 0.0, 1.0);
+        sums[walks.len() + 1] += f64::from(tracer.fetches);
+        let apart = (tracer.t.unwrap_or(1.0) - e.t.unwrap_or(1.0)).abs() * d.x.hypot(d.y);
+        assert!(apart < 1e-5, "ray {o} {d}: the plane walk's hit is {apart} texels from exact's");
         for (k, &walk) in walks.iter().enumerate() {
             let a = affine_first_hit(surface, bounds, walk, o, d, 0.0, 1.0);
             sums[k + 1] += f64::from(a.fetches);
@@ -341,8 +345,10 @@ const CHOICE_RAYS: usize = 64;
 fn affine_bounds_fetch_table() {
     let edges =
         if std::env::var("AFFINE_EDGES").is_ok_and(|e| e == "clamp") { EdgeMode::Clamp } else { EdgeMode::Wrap };
-    println!("| map | angle | exact | plane on demand | plane per cell | four values | chosen per map |");
-    println!("|---|--:|--:|--:|--:|--:|--:|");
+    println!(
+        "| map | angle | exact | plane on demand | plane per cell | four values | chosen per map | tracer's plane walk |"
+    );
+    println!("|---|--:|--:|--:|--:|--:|--:|--:|");
     for pattern in Pattern::ALL {
         let surface = Surface::new(generate(pattern, 512, 512), edges, 0.1);
         let bounds = Bounds::new(&surface);
@@ -353,12 +359,13 @@ fn affine_bounds_fetch_table() {
             let m = measure(&surface, &bounds, &rays, &[ON_DEMAND, PER_CELL, FOUR_VALUES]);
             let chosen = if planes { format!("{:.1} (planes)", m[2]) } else { format!("{:.1} (exact)", m[0]) };
             println!(
-                "| {} | {angle}° | {:.1} | {:.1} | {:.1} | {:.1} | {chosen} |",
+                "| {} | {angle}° | {:.1} | {:.1} | {:.1} | {:.1} | {chosen} | {:.1} |",
                 pattern.name(),
                 m[0],
                 m[1],
                 m[2],
-                m[3]
+                m[3],
+                m[4]
             );
         }
     }
