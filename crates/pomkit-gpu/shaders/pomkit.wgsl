@@ -730,6 +730,201 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, sa
     return PomkitWalk(-1.0, state.fetches);
 }
 
+// ---------------------------------------------------------------------------------------------
+// The walk on plane bounds per cell
+// ---------------------------------------------------------------------------------------------
+
+/// `seen` without the bits of the levels whose cells the ray leaves when it crosses a wall of
+/// levels up to `left` (`pomkit_levels_left`): the plane walk's cells of levels 1 to `left` and
+/// its 2x2 blocks of level 0. A wall of level 0 alone keeps everything.
+fn pomkit_forget_cells(seen: u32, left: u32) -> u32 {
+    if left == 0u {
+        return seen;
+    }
+    if left >= 31u {
+        return 0u;
+    }
+    return seen & ~((2u << left) - 1u);
+}
+
+/// The centre of cell `c`'s texel range at `level`, in the ray's unbounded coordinates (moved by
+/// the cell's tile where the edges wrap): the point a plane's depth is stored for.
+fn pomkit_plane_centre(map: PomkitMap, c: PomkitCell, level: u32) -> vec2<f32> {
+    let n = vec2<i32>(map.size);
+    let index = vec2<i32>(c.ix, c.iy);
+    let first = index << vec2<u32>(level);
+    let centre = 0.5 * vec2<f32>(first + min((index + 1) << vec2<u32>(level), n));
+    if map.edges == POMKIT_WRAP {
+        return c.lo - vec2<f32>(first) + centre;
+    }
+    return centre;
+}
+
+/// The plane walk's tuning, as pomkit_core's `plane_walk` module: levels above
+/// `pomkit_start_level` it starts at, the highest level it starts at, and the longest bracket,
+/// in texels of travel, whose patches it solves at once.
+const POMKIT_PLANES_START_UP: u32 = 2u;
+const POMKIT_PLANES_START_CAP: u32 = 5u;
+const POMKIT_PLANES_SOLVE_SPAN: f32 = 3.0;
+
+/// `pomkit_exact_first_hit` for rays going down (`d.z > 0`) on plane bounds per pyramid cell
+/// (pomkit_core trace/exact/plane_walk.rs, the twin: the same cells, patches and fetch counts).
+/// `planes` is `Rgba32Uint`, mip `l - 1` holding pyramid level `l`'s cells (pomkit_gpu's
+/// `PlaneBounds`): x = the cell's least depth (f32 bits), y = its plane's depth at the centre
+/// of its texel range (f32 bits), z = the plane's slopes along x and y (two f16), w = how far the
+/// surface reaches shallower and deeper than the plane over the cell (two f16). Level 0 reads
+/// `pyramid` as `pomkit_exact_first_hit` does.
+///
+/// A step skips a cell the ray crosses above `plane - shallower` or above its least depth;
+/// where the ray's depth reaches `plane + deeper` within `POMKIT_PLANES_SOLVE_SPAN` texels of
+/// where it can first meet the surface, it solves the patches from there, one per step,
+/// footprint by footprint up to the one holding that point (`solving`); otherwise it descends
+/// straight to the level as wide as that bracket.
+fn pomkit_planes_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, planes: texture_2d<u32>, samp: sampler, map: PomkitMap, o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> PomkitWalk {
+    let top = map.pyramid_levels - 1u;
+    let travel = length(d.xy);
+    // Bit l: at level 0 the 2x2 block of least depths is held, above it the cell's texel.
+    var seen = 0u;
+    var state = PomkitWalkState(0u, vec2<i32>(-2147483647));
+    var t = t0;
+    var level = min(min(pomkit_start_level(d, t0, t1, top) + POMKIT_PLANES_START_UP, POMKIT_PLANES_START_CAP), top);
+    var leaf = vec3<f32>(0.0);
+    var in_leaf = false;
+    var leaf_left = 0u;
+    // Solving a bracket of the cell at `level`: footprints up to the one holding `solve_end`,
+    // within the cell, which the ray leaves at `cell_exit`, crossing walls up to `cell_left`.
+    var solving = false;
+    var solve_end = 0.0;
+    var cell_exit = 0.0;
+    var cell_left = 0u;
+    var nudged = vec2<f32>(0.0);
+    var has_nudge = false;
+    for (var it = 0u; it < POMKIT_EXACT_MAX_STEPS; it++) {
+        if !in_leaf {
+            if t > t1 {
+                break;
+            }
+            let cell_level = select(level, 0u, solving);
+            let probe = select((o + d * t).xy, nudged, has_nudge);
+            let c = pomkit_cell_at(map, cell_level, probe, d);
+            let exits = pomkit_wall_times(c, o, d, t1);
+            let t_exit = max(min(min(exits.x, exits.y), t1), t);
+            if !(t_exit > t) && t < t1 {
+                if has_nudge {
+                    break;
+                }
+                let across = select(c.lo - 0.5, c.hi + 0.5, d.xy > vec2<f32>(0.0));
+                nudged = select(probe, across, (d.xy != vec2<f32>(0.0)) & (exits <= vec2<f32>(t)));
+                has_nudge = true;
+                continue;
+            }
+            has_nudge = false;
+            let left = pomkit_levels_left(map, c, cell_level, d, exits, t_exit);
+            if solving {
+                // The next footprint of the bracket: its patches, without its least depth.
+                leaf = pomkit_leaf_ends(map, o, d, t, t_exit, c);
+                leaf_left = left;
+                in_leaf = true;
+            } else {
+                let bit = 1u << min(level, 31u);
+                if (seen & bit) == 0u {
+                    seen |= bit;
+                    state.fetches += 1u;
+                }
+                let texel = textureLoad(planes, vec2<i32>(c.ix, c.iy) >> vec2<u32>(select(1u, 0u, level > 0u)), i32(max(level, 1u) - 1u));
+                let bound = select(textureLoad(pyramid, vec2<i32>(c.ix, c.iy), 0).r, bitcast<f32>(texel.x), level > 0u);
+                var skip = o.z + d.z * t_exit < bound;
+                // Before t_lo the least depth keeps the ray above the surface.
+                var t_lo = max(t, min((bound - o.z) / d.z, t_exit));
+                var under = -1.0;
+                if !skip && level > 0u && bound < 1.0 {
+                    let slope = unpack2x16float(texel.z);
+                    let widths = unpack2x16float(texel.w);
+                    // The ray's depth minus the plane's, linear, formed at the ray's point at t.
+                    let p = o + d * t;
+                    let g0 = p.z - (bitcast<f32>(texel.y) + dot(slope, p.xy - pomkit_plane_centre(map, c, level)));
+                    let g1 = d.z - dot(slope, d.xy);
+                    let g_exit = g0 + g1 * (t_exit - t);
+                    if max(g0 + g1 * (t_lo - t), g_exit) < -widths.x {
+                        skip = true;
+                    } else {
+                        if g0 + g1 * (t_lo - t) < -widths.x {
+                            t_lo = clamp(t + (-widths.x - g0) / g1, t_lo, t_exit);
+                        }
+                        if g0 + g1 * (t_lo - t) >= widths.y {
+                            under = t_lo;
+                        } else if g_exit >= widths.y {
+                            under = clamp(t + (widths.y - g0) / g1, t_lo, t_exit);
+                        }
+                    }
+                }
+                if skip {
+                    if t_exit >= t1 {
+                        break;
+                    }
+                    seen = pomkit_forget_cells(seen, left);
+                    if level < top && left > level {
+                        level += 1u;
+                    }
+                    t = t_exit;
+                    continue;
+                }
+                if bound >= 1.0 {
+                    // A flat floor, as in `pomkit_exact_first_hit`.
+                    return PomkitWalk(min(max(t, (1.0 - o.z) / d.z), t_exit), state.fetches);
+                }
+                if level > 0u {
+                    let span = (under - t_lo) * travel;
+                    if under >= 0.0 && span <= POMKIT_PLANES_SOLVE_SPAN {
+                        solving = true;
+                        solve_end = under;
+                        cell_exit = t_exit;
+                        cell_left = left;
+                        t = t_lo;
+                        continue;
+                    }
+                    t = t_lo;
+                    var wide = level - 1u;
+                    if under >= 0.0 {
+                        wide = u32(floor(log2(max(span, 1.0))));
+                    }
+                    level = min(level - 1u, wide);
+                    continue;
+                }
+                leaf = pomkit_leaf_ends(map, o, d, t, t_exit, c);
+                leaf_left = left;
+                in_leaf = true;
+            }
+        }
+        var end = leaf.z;
+        if leaf.y > t {
+            end = leaf.y;
+        }
+        if leaf.x > t {
+            end = leaf.x;
+        }
+        let h = pomkit_patch_hit(heights, samp, map, &state, o, d, t, end);
+        if h >= 0.0 {
+            return PomkitWalk(h, state.fetches);
+        }
+        t = end;
+        if end >= leaf.z {
+            in_leaf = false;
+            seen = pomkit_forget_cells(seen, leaf_left);
+            if end >= t1 {
+                break;
+            }
+            if solving && (end >= solve_end || end >= cell_exit) {
+                solving = false;
+                if end >= cell_exit && level < top && cell_left > level {
+                    level += 1u;
+                }
+            }
+        }
+    }
+    return PomkitWalk(-1.0, state.fetches);
+}
+
 // ===== module cone =====
 
 // pomkit shader library: the `cone` technique's walk, the twin of pomkit_core cone/mod.rs
@@ -1140,6 +1335,30 @@ fn pomkit_trace_walk(heights: texture_2d<f32>, pyramid: texture_2d<f32>, samp: s
     } else {
         walk = pomkit_exact_first_hit(heights, pyramid, samp, map, o, d, 0.0, 1.0);
     }
+    var t = walk.t;
+    if t < 0.0 {
+        t = 1.0;
+    }
+    t = clamp(t, 0.0, 1.0);
+    let p = o + d * t;
+    return PomkitHit(tile + p.xy / map.size, t, walk.fetches);
+}
+
+/// `exact` (`pomkit_trace` with `POMKIT_EXACT`) on plane bounds per pyramid cell: the same hit
+/// by `pomkit_planes_first_hit`'s walk, which reads fewer fetches where the relief slopes across
+/// its cells (docs/ACCURACY.md, "Affine bounds per cell"). `planes` is pomkit_gpu's
+/// `PlaneBounds` texture for this height map; `ray` comes from `pomkit_view_ray`, as for
+/// `pomkit_trace`.
+fn pomkit_trace_planes(heights: texture_2d<f32>, pyramid: texture_2d<f32>, planes: texture_2d<u32>, samp: sampler, params: PomkitParams, uv: vec2<f32>, ray: vec4<f32>) -> PomkitHit {
+    if !(ray.w > 0.0) {
+        return PomkitHit(uv, 0.0, 0u);
+    }
+    let tile = pomkit_entry_tile(uv, params.edges);
+    let map = pomkit_map(heights, pyramid, params);
+    let s = pomkit_ray_extent(ray.xyz, params.depth_scale);
+    let o = vec3<f32>((uv - tile) * map.size, 0.0);
+    let d = vec3<f32>(s * map.size, 1.0);
+    let walk = pomkit_planes_first_hit(heights, pyramid, planes, samp, map, o, d, 0.0, 1.0);
     var t = walk.t;
     if t < 0.0 {
         t = 1.0;

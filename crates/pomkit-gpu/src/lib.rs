@@ -17,6 +17,8 @@ pub mod library;
 pub mod material;
 #[cfg(feature = "renderer")]
 pub mod pipeline;
+#[cfg(feature = "renderer")]
+pub mod planes;
 // Public for pomkit-gpu's own tests (tests/library_rays.rs, tests/analytic.rs: the shader
 // library against pomkit-core, ray by ray; docs/GPU.md), which are outside the crate and need a
 // public path to it. It is not part of the renderer's API, so it is hidden from the docs.

@@ -270,3 +270,38 @@ pub const fn edges_index(e: EdgeMode) -> u32 {
         EdgeMode::Clamp => 1,
     }
 }
+
+/// The texels of pyramid level `level` (1 and up) that the library's `pomkit_planes_first_hit`
+/// reads from its `planes` texture (`Rgba32Uint`, mip `level - 1`), row by row over the level's
+/// [`MaxHeightPyramid::level_size`] cells: x = the cell's least depth (f32 bits), y = its plane's
+/// depth (f32 bits), z = the slopes along x (low half) and y (high half) as f16, w = the
+/// shallower (low) and deeper (high) widths as f16. `CellPlanes` stores slopes and widths as
+/// f16 values, so the halves are theirs exactly.
+///
+/// [`MaxHeightPyramid::level_size`]: pomkit_core::pyramid::MaxHeightPyramid::level_size
+///
+/// # Panics
+/// For level 0 or a level past the pyramid's last.
+#[must_use]
+pub fn plane_texels(
+    planes: &pomkit_core::planes::CellPlanes,
+    pyramid: &pomkit_core::pyramid::MaxHeightPyramid,
+    level: usize,
+) -> Vec<[u32; 4]> {
+    let half = |a: f32, b: f32| {
+        u32::from(half::f16::from_f32(a).to_bits()) | (u32::from(half::f16::from_f32(b).to_bits()) << 16)
+    };
+    let (w, h) = pyramid.level_size(level);
+    (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let c = planes.cell(level, x, y);
+            [
+                pyramid.min_depth(level, x, y).to_bits(),
+                c.depth.to_bits(),
+                half(c.slope[0], c.slope[1]),
+                half(c.shallower, c.deeper),
+            ]
+        })
+        .collect()
+}

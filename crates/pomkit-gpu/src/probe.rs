@@ -46,6 +46,7 @@ use wgpu::util::DeviceExt;
 
 use crate::height::HeightMaps;
 use crate::library::PomkitParams;
+use crate::planes::PlaneBounds;
 use crate::util::{texture_entry, trilinear_sampler};
 use crate::{GpuContext, GpuError};
 
@@ -124,6 +125,9 @@ pub struct RayProbe {
     trace: wgpu::ComputePipeline,
     curved: wgpu::ComputePipeline,
     shadow: wgpu::ComputePipeline,
+    exact: wgpu::ComputePipeline,
+    planes: wgpu::ComputePipeline,
+    no_planes: PlaneBounds,
     repeat: wgpu::Sampler,
     clamp: wgpu::Sampler,
 }
@@ -184,6 +188,16 @@ impl RayProbe {
                 buffer(3, wgpu::BufferBindingType::Uniform, PomkitParams::SIZE),
                 buffer(4, wgpu::BufferBindingType::Storage { read_only: true }, IN_SIZE),
                 buffer(5, wgpu::BufferBindingType::Storage { read_only: false }, OUT_SIZE),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 6,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -205,6 +219,9 @@ impl RayProbe {
             trace: pipeline("trace_main"),
             curved: pipeline("curved_main"),
             shadow: pipeline("shadow_main"),
+            exact: pipeline("exact_main"),
+            planes: pipeline("planes_main"),
+            no_planes: PlaneBounds::empty(device),
             layout,
             // Trilinear, as the material's sampler.
             repeat: trilinear_sampler(device, EdgeMode::Wrap, "pomkit ray probe"),
@@ -232,7 +249,29 @@ impl RayProbe {
     ) -> Result<Vec<Hit>, ProbeError> {
         let records =
             rays.iter().enumerate().map(|(index, r)| ray_record(index, r, 0.0)).collect::<Result<Vec<_>, _>>()?;
-        let out = self.run(ctx, maps, params, &self.trace, &records)?;
+        let out = self.run(ctx, maps, None, params, &self.trace, &records)?;
+        Ok(out.into_iter().map(|(uv, depth, fetches)| Hit { uv, depth, fetches }).collect())
+    }
+
+    /// Traces every ray with `exact`: with `planes`, by `pomkit_trace_planes` (the walk on plane
+    /// bounds per cell), else by `pomkit_trace_exact` (the least-depth walk), each called
+    /// directly rather than through `pomkit_trace`'s dispatch, so that timing one against the
+    /// other times the walks alone. Otherwise as [`RayProbe::trace`].
+    ///
+    /// # Errors
+    /// As [`RayProbe::trace`].
+    pub fn trace_exact(
+        &self,
+        ctx: &GpuContext,
+        maps: &HeightMaps,
+        planes: Option<&PlaneBounds>,
+        params: &PomkitParams,
+        rays: &[ProbeRay],
+    ) -> Result<Vec<Hit>, ProbeError> {
+        let records =
+            rays.iter().enumerate().map(|(index, r)| ray_record(index, r, 0.0)).collect::<Result<Vec<_>, _>>()?;
+        let pipeline = if planes.is_some() { &self.planes } else { &self.exact };
+        let out = self.run(ctx, maps, planes, params, pipeline, &records)?;
         Ok(out.into_iter().map(|(uv, depth, fetches)| Hit { uv, depth, fetches }).collect())
     }
 
@@ -262,7 +301,7 @@ impl RayProbe {
                 Ok(record)
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let out = self.run(ctx, maps, params, &self.curved, &records)?;
+        let out = self.run(ctx, maps, None, params, &self.curved, &records)?;
         Ok(out
             .into_iter()
             .map(|(uv, depth, fetches)| (Hit { uv, depth, fetches: fetches & 0x7fff_ffff }, fetches >> 31 == 1))
@@ -305,7 +344,7 @@ impl RayProbe {
             }
             records.push([q.uv.x, q.uv.y, q.lod, q.depth, q.light.x, q.light.y, q.light.z, 0.0]);
         }
-        let out = self.run(ctx, maps, params, &self.shadow, &records)?;
+        let out = self.run(ctx, maps, None, params, &self.shadow, &records)?;
         Ok(out.into_iter().map(|(_, visibility, fetches)| Shadow { visibility, fetches }).collect())
     }
 
@@ -314,6 +353,7 @@ impl RayProbe {
         &self,
         ctx: &GpuContext,
         maps: &HeightMaps,
+        planes: Option<&PlaneBounds>,
         params: &PomkitParams,
         pipeline: &wgpu::ComputePipeline,
         records: &[[f32; 8]],
@@ -325,7 +365,7 @@ impl RayProbe {
         let device = &ctx.device;
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let result = self.run_batches(ctx, maps, params, pipeline, records, &mut out);
+        let result = self.run_batches(ctx, maps, planes, params, pipeline, records, &mut out);
         let errors = [pollster::block_on(validation.pop()), pollster::block_on(oom.pop())];
         if let Some(e) = errors.into_iter().flatten().next() {
             return Err(GpuError::Device(format!("the ray probe: {e}")));
@@ -333,10 +373,12 @@ impl RayProbe {
         result.map(|()| out)
     }
 
+    #[expect(clippy::too_many_arguments, reason = "the surface's textures, the parameters, the pipeline and the rays")]
     fn run_batches(
         &self,
         ctx: &GpuContext,
         maps: &HeightMaps,
+        planes: Option<&PlaneBounds>,
         params: &PomkitParams,
         pipeline: &wgpu::ComputePipeline,
         records: &[[f32; 8]],
@@ -388,6 +430,10 @@ impl RayProbe {
                     wgpu::BindGroupEntry { binding: 3, resource: uniform.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 4, resource: input.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 5, resource: output.as_entire_binding() },
+                    wgpu::BindGroupEntry {
+                        binding: 6,
+                        resource: wgpu::BindingResource::TextureView(&planes.unwrap_or(&self.no_planes).view),
+                    },
                 ],
             });
             let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("probe") });

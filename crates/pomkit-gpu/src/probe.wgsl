@@ -28,6 +28,7 @@ struct ProbeOut {
 @group(0) @binding(3) var<uniform> probe_params: PomkitParams;
 @group(0) @binding(4) var<storage, read> probe_in: array<ProbeIn>;
 @group(0) @binding(5) var<storage, read_write> probe_out: array<ProbeOut>;
+@group(0) @binding(6) var probe_planes: texture_2d<u32>;
 
 /// A direction in ray terms (u, v, depth) as a tangent-space vector (T, B, N): B points along -v.
 fn probe_tangent(d: vec3<f32>) -> vec3<f32> {
@@ -70,4 +71,35 @@ fn shadow_main(@builtin(global_invocation_id) id: vec3<u32>) {
     let light = pomkit_light_ray(probe_tangent(r.b.xyz), vec2<f32>(1.0));
     let s = pomkit_shadow(probe_heights, probe_pyramid, probe_sampler, probe_params, r.a.xy, r.a.w, light, r.a.z);
     probe_out[i] = ProbeOut(r.a.xy, s.visibility, s.fetches);
+}
+
+/// `exact` by the least-depth walk, called directly (no technique dispatch).
+@compute @workgroup_size(64)
+fn exact_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= arrayLength(&probe_in) {
+        return;
+    }
+    let r = probe_in[i];
+    let ray = pomkit_view_ray(probe_tangent(r.b.xyz), vec2<f32>(1.0));
+    var hit = PomkitHit(r.a.xy, 0.0, 0u);
+    if ray.w > 0.0 {
+        let tile = pomkit_entry_tile(r.a.xy, probe_params.edges);
+        hit = pomkit_trace_exact(probe_heights, probe_pyramid, probe_sampler, probe_params, r.a.xy - tile, ray.xyz);
+        hit.uv += tile;
+    }
+    probe_out[i] = ProbeOut(hit.uv, hit.depth, hit.fetches);
+}
+
+/// `exact` by the walk on plane bounds per cell (`pomkit_trace_planes`).
+@compute @workgroup_size(64)
+fn planes_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= arrayLength(&probe_in) {
+        return;
+    }
+    let r = probe_in[i];
+    let ray = pomkit_view_ray(probe_tangent(r.b.xyz), vec2<f32>(1.0));
+    let hit = pomkit_trace_planes(probe_heights, probe_pyramid, probe_planes, probe_sampler, probe_params, r.a.xy, ray);
+    probe_out[i] = ProbeOut(hit.uv, hit.depth, hit.fetches);
 }
