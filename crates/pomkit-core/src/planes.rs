@@ -40,6 +40,19 @@ pub const EXACT_WIDTHS_UP_TO: usize = 5;
 /// evaluates the plane in f32.
 pub const PAD: f64 = 1.0 / (1u32 << 20) as f64;
 
+/// Why plane bounds were refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlaneBoundsError {
+    /// The bounds were built for a field of another size.
+    #[error("plane bounds built for another size than this {width}x{height} height map: build them from this one")]
+    Size {
+        /// Height map width.
+        width: u32,
+        /// Height map height.
+        height: u32,
+    },
+}
+
 /// One cell's bounds, as stored: the plane's depth at the centre of the cell's texel range
 /// (f32), its slopes in depth per texel along x and y, and the widths (f16 values).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -214,6 +227,17 @@ impl CellPlanes {
         let (w, cells) = &self.levels[level - 1];
         assert!(x < *w && (y * w + x) < cells.len() as u32, "cell ({x}, {y}) outside level {level}");
         cells[(y * w + x) as usize].plane()
+    }
+
+    /// Whether these bounds have the cells of `pyr`'s levels above level 0 (the pyramid of a
+    /// field of the size they were built for).
+    #[must_use]
+    pub fn fits(&self, pyr: &MaxHeightPyramid) -> bool {
+        self.levels.len() + 1 == pyr.len()
+            && self.levels.iter().enumerate().all(|(k, (w, cells))| {
+                let (pw, ph) = pyr.level_size(k + 1);
+                *w == pw && cells.len() == pw as usize * ph as usize
+            })
     }
 
     /// The centre of cell `(x, y)`'s texel range at `level`, the point [`CellPlane::depth`] is at.

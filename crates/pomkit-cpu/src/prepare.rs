@@ -72,6 +72,13 @@ pub(crate) fn prepare(scene: &Scene, opts: &RenderOptions, albedo: &[Arc<Vec<Tex
                 {
                     let _ = surface.set_cones(cones);
                 }
+                // `exact`'s view rays on plane bounds where they pay on this field, chosen once
+                // per field (the GPU renderer makes the same choice).
+                if technique == Technique::Exact
+                    && let Some(planes) = pomkit_core::trace::cached_plane_bounds(f, edges, depth_scale)
+                {
+                    let _ = surface.set_plane_bounds(Some(planes));
+                }
                 Arc::new(surface)
             });
             let normals = match (&m.normal_map, &m.height) {

@@ -885,3 +885,63 @@ fn the_plane_walk_traces_as_core_does() {
 /// Share of rays whose fetch counts may differ between the plane walks of the library and of
 /// pomkit-core.
 const PLANES_UNEQUAL: f64 = 0.002;
+
+/// The cost of a ray on this device, the least-depth walk against the plane walk:
+/// `cargo test --release -p pomkit-gpu --test library_rays plane_walk_timing -- --ignored --nocapture`
+/// (docs/BENCHMARKS.md, "The plane walk on lavapipe"). Per map and angle, 256x256 rays entering
+/// on a grid over the tile with one direction, as a frame's pixels on a flat quad do (neighbours
+/// in a SIMD group walk alike); each walk's dispatch timed on the wall clock, upload and read
+/// back included (a few hundred microseconds), the median of 5 after a warm-up, the walks
+/// taking turns.
+#[test]
+#[ignore = "a measurement for docs/BENCHMARKS.md, about 2 minutes on lavapipe"]
+fn plane_walk_timing() {
+    let Some(ctx) = gpu() else { return };
+    println!("adapter: {}", ctx.describe());
+    let passes = HeightPasses::new(&ctx.device);
+    let probe = RayProbe::new(&ctx.device).expect("the probe compiles");
+    println!("| map | angle | least depths (ms) | planes (ms) | planes / least | fetches per ray, least / planes |");
+    println!("|---|--:|--:|--:|--:|--:|");
+    for pattern in Pattern::ALL {
+        let plain = surface(&ctx, &passes, pattern, EdgeMode::Wrap);
+        let mut cpu = plain.cpu.clone();
+        cpu.use_plane_bounds();
+        let planes = PlaneBounds::new(&ctx.device, &ctx.queue, &cpu, pattern.name()).expect("the planes fit");
+        let params = pomkit_params(Technique::Exact, ShadowMode::None, &plain);
+        for angle in [60.0f32, 75.0, 85.0] {
+            let n = 256;
+            let rays: Vec<ProbeRay> = (0..n * n)
+                .map(|k| {
+                    let uv = Vec2::new((k % n) as f32 + 0.5, (k / n) as f32 + 0.5) / n as f32;
+                    ProbeRay::new(&Ray::at_angle(uv, angle.to_radians(), 0.6), 0.0)
+                })
+                .collect();
+            let mut times = [Vec::new(), Vec::new()];
+            let mut fetches = [0u64; 2];
+            for round in 0..6 {
+                for (k, bounds) in [None, Some(&planes)].into_iter().enumerate() {
+                    let start = std::time::Instant::now();
+                    let hits = probe.trace_exact(&ctx, &plain.gpu, bounds, &params, &rays).expect("runs");
+                    let elapsed = start.elapsed().as_secs_f64() * 1e3;
+                    if round > 0 {
+                        times[k].push(elapsed);
+                    }
+                    fetches[k] = hits.iter().map(|h| u64::from(h.fetches)).sum();
+                }
+            }
+            let median = |v: &mut Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
+            };
+            let (a, b) = (median(&mut times[0]), median(&mut times[1]));
+            let per_ray = |f: u64| f as f64 / rays.len() as f64;
+            println!(
+                "| {} | {angle}° | {a:.1} | {b:.1} | {:.2} | {:.1} / {:.1} |",
+                pattern.name(),
+                b / a,
+                per_ray(fetches[0]),
+                per_ray(fetches[1])
+            );
+        }
+    }
+}

@@ -25,9 +25,6 @@ pub(crate) struct ExactResult {
 /// patches it crosses there. Works for rays going down (`d.z > 0`) and up (`d.z < 0`, shadow
 /// rays) and for wrapped and clamped edges.
 ///
-/// Rays going down on a surface with plane bounds ([`Surface::use_plane_bounds`]) take the walk
-/// of [`plane_walk`] instead: the same hits, other fetches.
-///
 /// # Termination
 /// The loop runs at most [`exact_step_bound`] times. Each step either returns, stops, descends
 /// a level, or advances `t` strictly ([`entered_cell`] guarantees `t_exit > t`) to the moment
@@ -38,11 +35,6 @@ pub(crate) struct ExactResult {
 /// reduce the entry point to its tile where the edges wrap, so the coordinates stay small and the
 /// f64 walls exact.
 pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1: f64) -> ExactResult {
-    if d.z > 0.0
-        && let Some(planes) = surface.plane_bounds()
-    {
-        return plane_walk::planes_first_hit(surface, planes, o, d, t0, t1);
-    }
     let pyr = surface.pyramid();
     let f = surface.field();
     let (w, h) = (i64::from(f.width()), i64::from(f.height()));
@@ -127,6 +119,17 @@ pub(crate) fn exact_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1
         t = t_exit;
     }
     ExactResult { t: None, fetches }
+}
+
+/// The exact view trace's walk: [`plane_walk`]'s on a surface with plane bounds
+/// ([`Surface::use_plane_bounds`]), else [`exact_first_hit`]'s; the same hits, other fetches.
+/// Shadow and silhouette rays take [`exact_first_hit`]'s walk on every surface, as the shader
+/// library's do.
+pub(crate) fn view_first_hit(surface: &Surface, o: DVec3, d: DVec3, t0: f64, t1: f64) -> ExactResult {
+    match surface.plane_bounds() {
+        Some(planes) if d.z > 0.0 => plane_walk::planes_first_hit(surface, planes, o, d, t0, t1),
+        _ => exact_first_hit(surface, o, d, t0, t1),
+    }
 }
 
 /// How many levels below the one whose cells are as wide as the ray's horizontal travel the

@@ -25,7 +25,7 @@ use crate::heightfield::{EdgeMode, HeightField, MipChain};
 pub use crate::modes::{
     MAX_DEPTH_SCALE, MAX_PERSPECTIVE_BIAS, MAX_SAMPLES, MIN_PERSPECTIVE_BIAS, Technique, UnknownTechnique,
 };
-use crate::planes::CellPlanes;
+use crate::planes::{CellPlanes, PlaneBoundsError};
 use crate::pyramid::MaxHeightPyramid;
 
 mod cone;
@@ -35,7 +35,10 @@ pub(crate) mod shadow_march;
 mod surface;
 
 pub(crate) use exact::*;
-pub use surface::Surface;
+pub use surface::{Surface, cached_plane_bounds};
+
+/// View rays [`Surface::choose_plane_bounds`] decides by, per walk.
+pub const PLANE_CHOICE_RAYS: usize = 64;
 
 /// The flattest ray accepted, as `-dz` of the unit direction; flatter rays are steepened to it.
 pub const MIN_COS: f32 = 1e-3;
@@ -596,7 +599,7 @@ fn exact_view(surface: &Surface, uv0: Vec2, s: Vec2) -> Hit {
     // Work in unbounded texel coordinates and depth: P(t) = o + t * d with t = depth.
     let o = DVec3::new(f64::from(uv0.x) * size.x, f64::from(uv0.y) * size.y, 0.0);
     let d = DVec3::new(f64::from(s.x) * size.x, f64::from(s.y) * size.y, 1.0);
-    let r = exact_first_hit(surface, o, d, 0.0, 1.0);
+    let r = exact::view_first_hit(surface, o, d, 0.0, 1.0);
     let t = r.t.unwrap_or(1.0).clamp(0.0, 1.0);
     let p = o + d * t;
     Hit { uv: Vec2::new((p.x / size.x) as f32, (p.y / size.y) as f32), depth: t as f32, fetches: r.fetches }

@@ -78,14 +78,60 @@ impl Surface {
     }
 
     /// Builds the plane bounds of every pyramid cell ([`CellPlanes`]) and from then on walks
-    /// `exact`'s rays going down (view rays, and silhouette rays on their way in) on them: the
-    /// same hits, with fewer fetches where the relief slopes across the cells, more where rays
+    /// `exact`'s view rays on them: the same hits, with fewer fetches where the relief slopes across the cells, more where rays
     /// cross long runs of empty cells between thin features (docs/ACCURACY.md, "Affine bounds
-    /// per cell"). Shadow rays keep the least-depth walk. About five times the pyramid's build
-    /// (docs/BENCHMARKS.md).
+    /// per cell"). Shadow and silhouette rays keep the least-depth walk, as the shader library's
+    /// do. About five times the pyramid's build (docs/BENCHMARKS.md).
     pub fn use_plane_bounds(&mut self) {
         let planes = CellPlanes::new(self.field(), self.pyramid(), self.edges);
         self.planes = Some(std::sync::Arc::new(planes));
+    }
+
+    /// Walks `exact`'s view rays on plane bounds ([`Surface::use_plane_bounds`]) if they pay on
+    /// this surface: if [`PLANE_CHOICE_RAYS`] view rays at 75 degrees, spread over the tile,
+    /// read fewer fetches with them than without. They do on relief that slopes across its
+    /// pyramid cells (bricks, stones, waves, text on the built-in maps) and do not where rays
+    /// cross long runs of empty cells between thin features (fur, grass, a lone spike); the
+    /// hits are the same either way (docs/ACCURACY.md, "Affine bounds per cell"). Returns
+    /// whether it kept them. Costs the bounds' build and 128 traces.
+    pub fn choose_plane_bounds(&mut self) -> bool {
+        self.planes = None;
+        let params = TraceParams::default();
+        let rays: Vec<Ray> = (0..PLANE_CHOICE_RAYS)
+            .map(|k| {
+                // An R2 low-discrepancy set over the tile, azimuths by the golden angle.
+                let k = k as f32;
+                let uv = Vec2::new((0.5 + k * 0.754_877_7).fract(), (0.5 + k * 0.569_840_3).fract());
+                Ray::at_angle(uv, 75f32.to_radians(), k * 2.399_963)
+            })
+            .collect();
+        let fetches = |s: &Surface| -> u64 {
+            rays.iter().map(|r| u64::from(trace(s, r, Technique::Exact, &params).fetches)).sum()
+        };
+        let without = fetches(self);
+        self.use_plane_bounds();
+        let with = fetches(self);
+        if with >= without {
+            self.planes = None;
+        }
+        self.planes.is_some()
+    }
+
+    /// Walks `exact`'s view rays on `planes` (from [`cached_plane_bounds`], or built for this
+    /// field and edge mode by [`CellPlanes::new`]); `None` walks them on the least depths again.
+    /// Only the sizes can be checked.
+    ///
+    /// # Errors
+    /// [`PlaneBoundsError::Size`] if `planes` were built for a field of another size.
+    pub fn set_plane_bounds(&mut self, planes: Option<std::sync::Arc<CellPlanes>>) -> Result<(), PlaneBoundsError> {
+        if let Some(p) = &planes
+            && !p.fits(self.pyramid())
+        {
+            let f = self.field();
+            return Err(PlaneBoundsError::Size { width: f.width(), height: f.height() });
+        }
+        self.planes = planes;
+        Ok(())
     }
 
     /// The plane bounds [`Surface::use_plane_bounds`] built, if it was called.
@@ -173,4 +219,43 @@ impl Surface {
         let steps = cone_step_bound(self);
         u32::try_from(steps.saturating_mul(4).saturating_add(u64::from(binary_steps.min(64)))).unwrap_or(u32::MAX)
     }
+}
+
+/// The plane bounds `exact`'s view rays on `field` walk on, if they pay there
+/// ([`Surface::choose_plane_bounds`], at `depth_scale` with `edges`): chosen once per height
+/// field and shared while the field lives, as [`crate::cone::cached`] shares cones, so renderers
+/// that prepare their surfaces every frame choose once. Entries of fields that were dropped are
+/// forgotten.
+#[must_use]
+pub fn cached_plane_bounds(
+    field: &std::sync::Arc<HeightField>,
+    edges: EdgeMode,
+    depth_scale: f32,
+) -> Option<std::sync::Arc<CellPlanes>> {
+    use std::sync::{Arc, Mutex, Weak};
+    type Entry = (Weak<HeightField>, EdgeMode, u32, Option<Arc<CellPlanes>>);
+    static CACHE: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
+    let depth_scale = sanitized_depth_scale(depth_scale);
+    let key = depth_scale.to_bits();
+    let find = |cache: &mut Vec<Entry>| {
+        cache.retain(|(f, ..)| f.strong_count() > 0);
+        cache
+            .iter()
+            .find(|(f, e, k, _)| *e == edges && *k == key && f.as_ptr() == Arc::as_ptr(field))
+            .map(|(.., p)| p.clone())
+    };
+    // A poisoned lock only means another thread panicked while holding it; the list stays valid.
+    if let Some(p) = find(&mut CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner)) {
+        return p;
+    }
+    // Chosen outside the lock: two threads may both choose, never wait on each other.
+    let mut surface = Surface::new((**field).clone(), edges, depth_scale);
+    surface.choose_plane_bounds();
+    let planes = surface.planes.clone();
+    let mut cache = CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(p) = find(&mut cache) {
+        return p;
+    }
+    cache.push((Arc::downgrade(field), edges, key, planes.clone()));
+    planes
 }

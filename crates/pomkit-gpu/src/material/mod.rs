@@ -24,6 +24,7 @@ use crate::{GpuContext, GpuError};
 pub use crate::library::technique_index;
 use crate::library::{ParamError, PomkitParams};
 use crate::pipeline::{PipelineError, PipelineOptions};
+use crate::planes::PlaneBounds;
 
 mod frame;
 mod objects;
@@ -52,6 +53,15 @@ pub struct GpuMaterial {
     /// Whether the next [`GpuMaterial::encode_rebuild`] builds the cones on the GPU: set by
     /// [`GpuMaterial::rebuild_cones`], or when [`GpuMaterial::set_params`] switches to `cone`.
     cones_stale: std::sync::atomic::AtomicBool,
+    /// The plane bounds `exact` walks on (chosen per height map: where they read fewer
+    /// fetches, `pomkit_core::trace::cached_plane_bounds`), while `plane_bounds_on` holds.
+    planes: Option<PlaneBounds>,
+    /// Cleared when the heights may have changed since the bounds were built: by
+    /// [`GpuMaterial::update_height`], and by every [`GpuMaterial::encode_rebuild`] after the
+    /// first (a compute shader of the caller's may have written the heights).
+    plane_bounds_on: std::sync::atomic::AtomicBool,
+    /// Whether [`GpuMaterial::encode_rebuild`] ran before.
+    rebuilt: std::sync::atomic::AtomicBool,
     /// The material's uniform block: [`PomkitParams`] in its first 64 bytes.
     uniforms: wgpu::Buffer,
     params: PomkitParams,
@@ -89,6 +99,10 @@ impl GpuMaterial {
             }
             None => None,
         };
+        let planes = match &material.height {
+            Some(field) if technique == Technique::Exact => plane_bounds(ctx, field, material, depth_scale)?,
+            _ => None,
+        };
         let explicit_normals = material.normal_map.as_ref().map(|n| upload_normal_map(ctx, n)).transpose()?;
         let albedo = {
             let base = material.albedo.as_ref().map_or_else(|| Texture::constant(Vec3::ONE), |t| (**t).clone());
@@ -110,7 +124,8 @@ impl GpuMaterial {
         let has_normals = explicit_normals.is_some() || field.is_some_and(|f| f.width() >= 2 && f.height() >= 2);
         let params = PomkitParams::from_material(material, technique);
         let albedo_size = (albedo[0].width(), albedo[0].height(), albedo.len() as u32);
-        let u = material_block(&params, material, field.is_some(), has_normals, albedo_size);
+        let flags = Flags { has_height: field.is_some(), has_normals, plane_bounds: planes.is_some() };
+        let u = material_block(&params, material, flags, albedo_size);
         let uniforms = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("pomkit material"),
             contents: &u.bytes(),
@@ -136,6 +151,10 @@ impl GpuMaterial {
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(pyramid_view) },
                 wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&albedo_view) },
                 wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::Sampler(&sampler) },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: wgpu::BindingResource::TextureView(planes.as_ref().map_or(&d.planes, |p| &p.view)),
+                },
             ],
         });
         let silhouette = material.silhouette && height.is_some() && technique.displaces();
@@ -146,6 +165,9 @@ impl GpuMaterial {
             height,
             height_options,
             cones_stale: false.into(),
+            plane_bounds_on: planes.is_some().into(),
+            planes,
+            rebuilt: false.into(),
             uniforms,
             params,
             bind_group,
@@ -225,7 +247,8 @@ impl GpuMaterial {
         };
         let params = PomkitParams::from_material(material, technique);
         let has_normals = explicit_view.is_some() || (height.width() >= 2 && height.height() >= 2);
-        let u = material_block(&params, material, true, has_normals, albedo_size);
+        let flags = Flags { has_height: true, has_normals, plane_bounds: false };
+        let u = material_block(&params, material, flags, albedo_size);
         let uniforms = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("pomkit material"),
             contents: &u.bytes(),
@@ -248,6 +271,10 @@ impl GpuMaterial {
                 },
                 wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&albedo_view) },
                 wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::Sampler(height.sampler()) },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: wgpu::BindingResource::TextureView(&pipelines.dummy.planes),
+                },
             ],
         });
         Ok(Self {
@@ -257,6 +284,9 @@ impl GpuMaterial {
             height: None,
             height_options: height.options().pass_options(),
             cones_stale: false.into(),
+            planes: None,
+            plane_bounds_on: false.into(),
+            rebuilt: false.into(),
             uniforms,
             params,
             bind_group,
@@ -305,9 +335,30 @@ impl GpuMaterial {
         timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
     ) {
         if let Some(maps) = &self.height {
+            if self.rebuilt.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                // The heights may have changed since the plane bounds were built.
+                self.turn_off_plane_bounds(encoder);
+            }
             let build_cones = self.cones_stale.swap(false, std::sync::atomic::Ordering::Relaxed);
             let opts = HeightPassOptions { build_cones, ..self.height_options };
             pipelines.passes.encode(device, encoder, maps, &opts, timestamps);
+        }
+    }
+
+    /// Whether `exact` walks on plane bounds: chosen when the material was made (`exact`, a
+    /// height map of its own, and bounds that read fewer fetches on it), and turned off for good
+    /// once the heights may change ([`GpuMaterial::update_height`], a second
+    /// [`GpuMaterial::encode_rebuild`]). The hits are the same either way.
+    #[must_use]
+    pub fn walks_on_plane_bounds(&self) -> bool {
+        self.planes.is_some() && self.plane_bounds_on.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Zeroes the uniform's `plane_bounds` flag (a buffer clear recorded in `encoder`, before
+    /// any pass of it that draws).
+    fn turn_off_plane_bounds(&self, encoder: &mut wgpu::CommandEncoder) {
+        if self.plane_bounds_on.swap(false, std::sync::atomic::Ordering::Relaxed) {
+            encoder.clear_buffer(&self.uniforms, plane_bounds_offset(), Some(4));
         }
     }
 
@@ -332,6 +383,10 @@ impl GpuMaterial {
             )));
         }
         maps.upload_depths(ctx, field.depths())?;
+        // The plane bounds described the old heights: `exact` walks on the least depths.
+        if self.plane_bounds_on.swap(false, std::sync::atomic::Ordering::Relaxed) {
+            ctx.queue.write_buffer(&self.uniforms, plane_bounds_offset(), &0u32.to_le_bytes());
+        }
         // The cones described the old heights: `cone` walks as `exact` does from now on, unless
         // the caller asks for new ones (`rebuild_cones`).
         if self.technique == Technique::Cone {
@@ -367,11 +422,18 @@ impl GpuMaterial {
 }
 
 /// `render.wgsl`'s `Material` uniform: the library's parameters, then pomkit's shading.
+/// The material block's flags.
+#[derive(Clone, Copy)]
+struct Flags {
+    has_height: bool,
+    has_normals: bool,
+    plane_bounds: bool,
+}
+
 fn material_block(
     params: &PomkitParams,
     material: &Material,
-    has_height: bool,
-    has_normals: bool,
+    Flags { has_height, has_normals, plane_bounds }: Flags,
     (albedo_w, albedo_h, albedo_levels): (u32, u32, u32),
 ) -> Std140 {
     let mut u = Std140::new();
@@ -384,7 +446,30 @@ fn material_block(
     u.named("albedo_size", 8).f(albedo_w as f32).f(albedo_h as f32);
     u.named("albedo_max_level", 4).f(albedo_levels.saturating_sub(1) as f32);
     u.named("pixel_depth_offset", 4).u(u32::from(material.pixel_depth_offset));
+    u.named("plane_bounds", 4).u(u32::from(plane_bounds));
     u
+}
+
+/// The byte offset of the `plane_bounds` flag in the material block.
+fn plane_bounds_offset() -> u64 {
+    material_layout().iter().find(|(name, _)| *name == "plane_bounds").map_or(0, |&(_, offset)| offset as u64)
+}
+
+/// The plane bounds `exact` walks on for `field`, if they read fewer fetches there
+/// ([`pomkit_core::trace::cached_plane_bounds`], the choice the CPU renderer makes): built for
+/// the f16-rounded depths the GPU samples, and uploaded.
+fn plane_bounds(
+    ctx: &GpuContext,
+    field: &Arc<HeightField>,
+    material: &Material,
+    depth_scale: f32,
+) -> Result<Option<PlaneBounds>, GpuError> {
+    if pomkit_core::trace::cached_plane_bounds(field, material.edges, depth_scale).is_none() {
+        return Ok(None);
+    }
+    let mut surface = pomkit_core::trace::Surface::new(crate::height::f16_surface(field), material.edges, depth_scale);
+    surface.use_plane_bounds();
+    PlaneBounds::new(&ctx.device, &ctx.queue, &surface, &material.name).map(Some)
 }
 
 /// Each member's name and byte offset in `render.wgsl`'s `Material` uniform as pomkit writes
@@ -392,7 +477,8 @@ fn material_block(
 #[must_use]
 pub fn material_layout() -> Vec<(&'static str, usize)> {
     let params = PomkitParams::from_material(&Material::default(), Technique::Pom);
-    material_block(&params, &Material::default(), true, true, (1, 1, 1)).layout()
+    let flags = Flags { has_height: true, has_normals: true, plane_bounds: true };
+    material_block(&params, &Material::default(), flags, (1, 1, 1)).layout()
 }
 
 fn upload_normal_map(ctx: &GpuContext, n: &NormalMap) -> Result<wgpu::Texture, GpuError> {

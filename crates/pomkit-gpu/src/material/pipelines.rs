@@ -75,6 +75,8 @@ pub(super) struct DummyTextures {
     pub(super) heights: wgpu::TextureView,
     pub(super) normals: wgpu::TextureView,
     pub(super) pyramid: wgpu::TextureView,
+    /// A 1x1 `Rgba32Uint` for a material without plane bounds (never read).
+    pub(super) planes: wgpu::TextureView,
 }
 
 pub(super) fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
@@ -162,6 +164,16 @@ impl MaterialPipelines {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 6,
+                    visibility: fragment,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let object_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -180,6 +192,7 @@ impl MaterialPipelines {
             heights: one("pomkit no height", wgpu::TextureFormat::Rgba16Float, rgba16f_bytes(&[0.0; 4])),
             normals: one("pomkit no normals", wgpu::TextureFormat::Rgba16Float, rgba16f_bytes(&[0.0, 0.0, 1.0, 0.0])),
             pyramid: one("pomkit no pyramid", wgpu::TextureFormat::Rg32Float, [0u8; 8].to_vec()),
+            planes: crate::planes::PlaneBounds::empty(device).view,
         };
         Self {
             shader,

@@ -51,6 +51,8 @@ struct Material {
     albedo_size: vec2<f32>,
     albedo_max_level: f32,
     pixel_depth_offset: u32,
+    // 1 when `planes` holds the height map's plane bounds: `exact` then walks on them.
+    plane_bounds: u32,
 }
 
 struct Object {
@@ -71,6 +73,9 @@ struct Object {
 @group(1) @binding(4) var albedo: texture_2d<f32>;
 // Trilinear, address mode = the material's edge mode.
 @group(1) @binding(5) var samp: sampler;
+// The plane bounds per pyramid cell (pomkit_gpu::planes::PlaneBounds), or a 1x1 texture never
+// read when `material.plane_bounds` is 0.
+@group(1) @binding(6) var planes: texture_2d<u32>;
 @group(2) @binding(0) var<uniform> object: Object;
 
 // ---------------------------------------------------------------------------------------------
@@ -361,6 +366,9 @@ fn shade(in: VertexOut, g: Gradients, silhouette: bool) -> Shading {
             hit = curved.hit;
             ray_depth = curved.ray_depth;
             left = curved.left;
+        } else if TECHNIQUE == POMKIT_EXACT && material.plane_bounds != 0u {
+            hit = pomkit_trace_planes(heights, pyramid, planes, samp, material.params, in.uv, ray);
+            ray_depth = hit.depth;
         } else {
             hit = pomkit_trace(TECHNIQUE, heights, pyramid, samp, material.params, in.uv, ray, lod);
             ray_depth = hit.depth;
