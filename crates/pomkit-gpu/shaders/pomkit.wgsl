@@ -831,8 +831,14 @@ fn pomkit_planes_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, p
                     seen |= bit;
                     state.fetches += 1u;
                 }
-                let texel = textureLoad(planes, vec2<i32>(c.ix, c.iy) >> vec2<u32>(select(1u, 0u, level > 0u)), i32(max(level, 1u) - 1u));
-                let bound = select(textureLoad(pyramid, vec2<i32>(c.ix, c.iy), 0).r, bitcast<f32>(texel.x), level > 0u);
+                var texel = vec4<u32>(0u);
+                var bound: f32;
+                if level > 0u {
+                    texel = textureLoad(planes, vec2<i32>(c.ix, c.iy), i32(level - 1u));
+                    bound = bitcast<f32>(texel.x);
+                } else {
+                    bound = textureLoad(pyramid, vec2<i32>(c.ix, c.iy), 0).r;
+                }
                 var skip = o.z + d.z * t_exit < bound;
                 // Before t_lo the least depth keeps the ray above the surface.
                 var t_lo = max(t, min((bound - o.z) / d.z, t_exit));

@@ -888,13 +888,12 @@ const PLANES_UNEQUAL: f64 = 0.002;
 
 /// The cost of a ray on this device, the least-depth walk against the plane walk:
 /// `cargo test --release -p pomkit-gpu --test library_rays plane_walk_timing -- --ignored --nocapture`
-/// (docs/BENCHMARKS.md, "The plane walk on lavapipe"). Per map and angle, 256x256 rays entering
+/// (docs/BENCHMARKS.md, "The plane walk on lavapipe"). Per map and angle, 512x512 rays entering
 /// on a grid over the tile with one direction, as a frame's pixels on a flat quad do (neighbours
 /// in a SIMD group walk alike); each walk's dispatch timed on the wall clock, upload and read
-/// back included (a few hundred microseconds), the median of 5 after a warm-up, the walks
-/// taking turns.
+/// back included, the median of 7 after a warm-up, the walks taking turns.
 #[test]
-#[ignore = "a measurement for docs/BENCHMARKS.md, about 2 minutes on lavapipe"]
+#[ignore = "a measurement for docs/BENCHMARKS.md, about 3 minutes on lavapipe"]
 fn plane_walk_timing() {
     let Some(ctx) = gpu() else { return };
     println!("adapter: {}", ctx.describe());
@@ -909,7 +908,7 @@ fn plane_walk_timing() {
         let planes = PlaneBounds::new(&ctx.device, &ctx.queue, &cpu, pattern.name()).expect("the planes fit");
         let params = pomkit_params(Technique::Exact, ShadowMode::None, &plain);
         for angle in [60.0f32, 75.0, 85.0] {
-            let n = 256;
+            let n = 512;
             let rays: Vec<ProbeRay> = (0..n * n)
                 .map(|k| {
                     let uv = Vec2::new((k % n) as f32 + 0.5, (k / n) as f32 + 0.5) / n as f32;
@@ -918,7 +917,7 @@ fn plane_walk_timing() {
                 .collect();
             let mut times = [Vec::new(), Vec::new()];
             let mut fetches = [0u64; 2];
-            for round in 0..6 {
+            for round in 0..8 {
                 for (k, bounds) in [None, Some(&planes)].into_iter().enumerate() {
                     let start = std::time::Instant::now();
                     let hits = probe.trace_exact(&ctx, &plain.gpu, bounds, &params, &rays).expect("runs");

@@ -331,15 +331,10 @@ fn the_affine_walk_finds_the_exact_hits() {
     }
 }
 
-/// Rays a map's walk is chosen by when it is built: a few at 75 degrees, of another seed than
-/// the table's.
-const CHOICE_RAYS: usize = 64;
-
 /// The table of docs/ACCURACY.md, "Affine bounds per cell": `cargo test --release -p
 /// pomkit-core --lib affine_bounds_fetch_table -- --ignored --nocapture` (`AFFINE_EDGES=clamp`
-/// for clamped edges). The last column is the walk chosen per map by [`CHOICE_RAYS`] rays at
-/// 75 degrees: the plane per cell where those rays take fewer fetches with it than with
-/// `exact`'s walk, else `exact`'s.
+/// for clamped edges). The column "chosen per map" is the walk the renderers choose
+/// ([`Surface::choose_plane_bounds`]), the last the tracer's plane walk.
 #[test]
 #[ignore = "a measurement for docs/ACCURACY.md, under 10 s in release"]
 fn affine_bounds_fetch_table() {
@@ -352,8 +347,8 @@ fn affine_bounds_fetch_table() {
     for pattern in Pattern::ALL {
         let surface = Surface::new(generate(pattern, 512, 512), edges, 0.1);
         let bounds = Bounds::new(&surface);
-        let sample = measure(&surface, &bounds, &texel_rays(75.0, CHOICE_RAYS, 2, 512.0, 0.1), &[PER_CELL]);
-        let planes = sample[1] < sample[0];
+        // The renderers' choice.
+        let planes = surface.clone().choose_plane_bounds();
         for angle in [60.0f32, 75.0, 85.0] {
             let rays = texel_rays(angle, 2000, 1, 512.0, 0.1);
             let m = measure(&surface, &bounds, &rays, &[ON_DEMAND, PER_CELL, FOUR_VALUES]);
