@@ -50,7 +50,7 @@ use pomkit_core::procedural::Pattern;
 #[derive(Parser)]
 struct Args {
     /// pomkit technique (flat, normal, parallax, iterative, steep, pom-classic, pom, relief,
-    /// exact, cone) or bevy-occlusion / bevy-relief [default: pom; with --gltf, the file's].
+    /// exact, cone) or bevy-occlusion / bevy-relief [default: exact; with --gltf, the file's].
     #[arg(long)]
     technique: Option<String>,
     /// Self-shadow mode: none, hard, soft, exact or depth [default: soft; with --gltf, the
@@ -131,7 +131,7 @@ fn run(args: &Args) -> Result<(), String> {
 
 /// The demo scene, as the arguments set it up.
 fn demo_scene(args: &Args, shadow: Option<bevy_pomkit::ShadowMode>) -> Result<(headless::Headless, String), String> {
-    let method = scene::Method::parse(args.technique.as_deref().unwrap_or("pom"))?;
+    let method = scene::Method::parse(args.technique.as_deref().unwrap_or("exact"))?;
     let pattern: Pattern = args.pattern.parse().map_err(|e| format!("--pattern: {e}"))?;
     let opts = scene::SceneOptions {
         method,
@@ -160,7 +160,7 @@ fn demo_scene(args: &Args, shadow: Option<bevy_pomkit::ShadowMode>) -> Result<(h
 /// sun on a grey background.
 fn spheres_scene(args: &Args, shadow: Option<bevy_pomkit::ShadowMode>) -> Result<(headless::Headless, String), String> {
     let technique: bevy_pomkit::Technique = match args.technique.as_deref() {
-        None => bevy_pomkit::Technique::Pom,
+        None => bevy_pomkit::Technique::Exact,
         Some(t) => t.parse().map_err(|e| format!("--technique: {e} (with --spheres, a pomkit technique)"))?,
     };
     let pattern: Pattern = args.pattern.parse().map_err(|e| format!("--pattern: {e}"))?;

@@ -50,7 +50,7 @@ struct State {
 
 impl Default for State {
     fn default() -> Self {
-        let technique = Technique::ALL.iter().position(|t| *t == Technique::Pom).unwrap_or(0);
+        let technique = Technique::ALL.iter().position(|t| *t == Technique::Exact).unwrap_or(0);
         Self { technique, bevy: None, rotate: true }
     }
 }

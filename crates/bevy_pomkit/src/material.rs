@@ -151,7 +151,7 @@ pub struct Pomkit {
 }
 
 impl Pomkit {
-    /// `pom` with pomkit's defaults on `height_map` (white high).
+    /// `exact` (the default technique) with pomkit's defaults on `height_map` (white high).
     #[must_use]
     pub fn new(height_map: Handle<Image>) -> Self {
         let defaults = pomkit_core::scene::Material::default();
@@ -159,7 +159,7 @@ impl Pomkit {
             height_map,
             map_kind: MapKind::Height,
             channel: Channel::Luma,
-            technique: Technique::Pom,
+            technique: Technique::Exact,
             shadow: ShadowParams::default(),
             depth_scale: defaults.depth_scale,
             edges: defaults.edges,

@@ -87,7 +87,13 @@ fn check_golden(actual: &Path, name: &str) {
 fn demo_scene_matches_its_golden_images() {
     let dir = tempfile::tempdir().unwrap();
     for (args, name) in [
-        (vec!["render", "--backend", "cpu", "--size", "320x180", "-o", "demo.png"], "demo.png"),
+        // The demo's technique is the default one, `exact`: the same picture as `--technique
+        // exact`, checked against that golden image.
+        (vec!["render", "--backend", "cpu", "--size", "320x180", "-o", "demo.png"], "demo-exact.png"),
+        (
+            vec!["render", "--backend", "cpu", "--size", "320x180", "--technique", "pom", "-o", "pom.png"],
+            "demo-pom.png",
+        ),
         (
             vec!["render", "--backend", "cpu", "--size", "320x180", "--technique", "normal", "-o", "normal.png"],
             "demo-normal.png",

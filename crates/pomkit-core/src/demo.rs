@@ -26,7 +26,7 @@ pub fn procedural_material(pattern: Pattern, size: u32, depth_scale: f32) -> Mat
         albedo,
         base_color: Vec3::ONE,
         height: Some(Arc::new(field)),
-        technique: Technique::Pom,
+        technique: Technique::Exact,
         depth_scale,
         trace: TraceParams { min_samples: 8, max_samples: 32, refine: 2, ..TraceParams::default() },
         shadow: ShadowParams { mode: ShadowMode::Soft, softness: 0.08 },

@@ -483,7 +483,7 @@ impl Default for Material {
             base_color: Vec3::from_array(p::BASE_COLOR),
             normal_map: None,
             height: None,
-            technique: Technique::Pom,
+            technique: Technique::Exact,
             depth_scale: p::DEPTH_SCALE,
             edges: EdgeMode::Wrap,
             trace: TraceParams::default(),

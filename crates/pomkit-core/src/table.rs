@@ -357,7 +357,7 @@ pub const TECHNIQUE: Param = Param {
     key: "technique",
     label: "Technique",
     kind: Kind::Choice(&TECHNIQUE_NAMES),
-    default: Value::Name("pom"),
+    default: Value::Name("exact"),
     doc: "How the surface is displaced",
     details: "flat: plain texturing. normal: normal mapping only.\n\
               parallax: one-sample offset with offset limiting (Kaneko 2001, Welsh 2004).\n\
@@ -772,6 +772,6 @@ mod tests {
         assert_eq!(EDGES.kind.describe(), "wrap or clamp");
         assert_eq!(SILHOUETTE.uses.describe(), "every displacing technique");
         assert_eq!(BASE_COLOR.default.toml(), "[0.8, 0.8, 0.8]");
-        assert_eq!(TECHNIQUE.default.toml(), "\"pom\"");
+        assert_eq!(TECHNIQUE.default.toml(), "\"exact\"");
     }
 }

@@ -747,6 +747,23 @@ fn pomkit_forget_cells(seen: u32, left: u32) -> u32 {
     return seen & ~((2u << left) - 1u);
 }
 
+/// The f16 whose bits are `bits` (finite: the planes hold no infinity or NaN), as an f32, with
+/// integer operations: `unpack2x16float` needs a capability (naga's
+/// `SHADER_FLOAT16_IN_FLOAT32`) that not every host's device has. Normal halves get the f32
+/// exponent bias and a widened mantissa; subnormal ones are their mantissa times 2^-24.
+fn pomkit_half(bits: u32) -> f32 {
+    let magnitude = bits & 0x7fffu;
+    let sign = (bits & 0x8000u) << 16u;
+    let normal = bitcast<f32>(sign | ((magnitude + 0x1c000u) << 13u));
+    let subnormal = bitcast<f32>(sign | bitcast<u32>(f32(magnitude) * 5.9604645e-8));
+    return select(normal, subnormal, magnitude < 0x400u);
+}
+
+/// The two f16 of `packed`: the low half in x, the high half in y.
+fn pomkit_halves(packed: u32) -> vec2<f32> {
+    return vec2<f32>(pomkit_half(packed & 0xffffu), pomkit_half(packed >> 16u));
+}
+
 /// The centre of cell `c`'s texel range at `level`, in the ray's unbounded coordinates (moved by
 /// the cell's tile where the edges wrap): the point a plane's depth is stored for.
 fn pomkit_plane_centre(map: PomkitMap, c: PomkitCell, level: u32) -> vec2<f32> {
@@ -844,8 +861,8 @@ fn pomkit_planes_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, p
                 var t_lo = max(t, min((bound - o.z) / d.z, t_exit));
                 var under = -1.0;
                 if !skip && level > 0u && bound < 1.0 {
-                    let slope = unpack2x16float(texel.z);
-                    let widths = unpack2x16float(texel.w);
+                    let slope = pomkit_halves(texel.z);
+                    let widths = pomkit_halves(texel.w);
                     // The ray's depth minus the plane's, linear, formed at the ray's point at t.
                     let p = o + d * t;
                     let g0 = p.z - (bitcast<f32>(texel.y) + dot(slope, p.xy - pomkit_plane_centre(map, c, level)));

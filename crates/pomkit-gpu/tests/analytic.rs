@@ -4,7 +4,8 @@
 //! `pomkit_gpu::probe` on lavapipe) on the f16 depths the GPU samples. `cone` walks the CPU's
 //! cones with wrap edges and cones built on the GPU (`HeightPassOptions::build_cones`) with
 //! clamp edges, so both builds' cones are checked to hold on surfaces whose cones the slope
-//! bound decides (the plane, the pyramid, the cap).
+//! bound decides (the plane, the pyramid, the cap). `exact` runs on plane bounds too
+//! (`pomkit_trace_planes`).
 //!
 //! Without a GPU adapter the test prints "skipping: ..." and passes, unless POMKIT_REQUIRE_GPU=1.
 
@@ -12,11 +13,12 @@ use glam::Vec2;
 use pomkit_core::accuracy::{analytic_fields, brute_force_depth, ray_set};
 use pomkit_core::cone::ConeMap;
 use pomkit_core::shadow::{ShadowMode, ShadowParams};
-use pomkit_core::trace::{Ray, Technique, TraceParams};
+use pomkit_core::trace::{Ray, Surface, Technique, TraceParams};
 use pomkit_core::{EdgeMode, HeightField};
 use pomkit_gpu::GpuContext;
 use pomkit_gpu::height::{HeightMaps, HeightPassOptions, HeightPasses, f16_surface};
 use pomkit_gpu::library::PomkitParams;
+use pomkit_gpu::planes::PlaneBounds;
 use pomkit_gpu::probe::{ProbeRay, RayProbe};
 
 /// Side of the analytic fields, as in pomkit-core's test.
@@ -65,21 +67,31 @@ fn exact_and_cone_on_the_gpu_match_brute_force_on_analytic_fields_at_every_angle
     let passes = HeightPasses::new(&ctx.device);
     let probe = RayProbe::new(&ctx.device).expect("the probe compiles");
     let mut failures = Vec::new();
-    let mut worst = [0.0f64; 2];
+    let mut worst = [0.0f64; 3];
     for edges in [EdgeMode::Wrap, EdgeMode::Clamp] {
         for (name, field) in analytic_fields(N) {
             let field = f16_surface(&field);
             let maps = upload(&ctx, &passes, &field, edges, edges == EdgeMode::Clamp);
+            // `exact` on plane bounds too (`pomkit_trace_planes`), built for the same heights.
+            let mut surface = Surface::new(field.clone(), edges, DEPTH_SCALE);
+            surface.use_plane_bounds();
+            let planes = PlaneBounds::new(&ctx.device, &ctx.queue, &surface, name).expect("the planes fit");
             for angle in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
                 let rays = ray_set(angle, 24, 7);
                 let truth: Vec<f64> =
                     rays.iter().map(|r| brute_force_depth(&field, edges, r, f64::from(DEPTH_SCALE))).collect();
                 let probe_rays: Vec<ProbeRay> = rays.iter().map(|r| ProbeRay::new(r, 0.0)).collect();
-                for (k, t) in [Technique::Exact, Technique::Cone].into_iter().enumerate() {
+                for (k, t) in [Technique::Exact, Technique::Cone, Technique::Exact].into_iter().enumerate() {
                     let shadow = ShadowParams { mode: ShadowMode::None, softness: 0.1 };
                     let params = PomkitParams::new(t, shadow, TraceParams::default(), DEPTH_SCALE, edges, f32::MAX)
                         .expect("valid parameters");
-                    let hits = probe.trace(&ctx, &maps, &params, &probe_rays).expect("the probe runs");
+                    let hits = if k == 2 {
+                        probe.trace_exact(&ctx, &maps, Some(&planes), &params, &probe_rays)
+                    } else {
+                        probe.trace(&ctx, &maps, &params, &probe_rays)
+                    };
+                    let hits = hits.expect("the probe runs");
+                    let t = if k == 2 { "exact on plane bounds".to_owned() } else { t.to_string() };
                     for ((ray, hit), &z) in rays.iter().zip(&hits).zip(&truth) {
                         let err = f64::from(((hit.uv - on_ray(ray, z)) * N as f32).length());
                         let err = if err.is_nan() { f64::INFINITY } else { err };
@@ -95,6 +107,9 @@ fn exact_and_cone_on_the_gpu_match_brute_force_on_analytic_fields_at_every_angle
             }
         }
     }
-    println!("worst hit against brute force: exact {:.5} texel, cone {:.5} texel", worst[0], worst[1]);
+    println!(
+        "worst hit against brute force: exact {:.5} texel, cone {:.5} texel, exact on plane bounds {:.5} texel",
+        worst[0], worst[1], worst[2]
+    );
     assert!(failures.is_empty(), "{} rays off:\n{}", failures.len(), failures.join("\n"));
 }

@@ -246,7 +246,7 @@ fn material_folder_on_an_object_equals_the_maps_named_one_by_one() {
     assert_eq!(a.height.as_ref().unwrap().depths(), b.height.as_ref().unwrap().depths());
     // Every other setting is the scene file's default.
     assert_eq!((a.technique, a.depth_scale), (b.technique, b.depth_scale));
-    assert_eq!(a.technique, Technique::Pom);
+    assert_eq!(a.technique, Technique::Exact);
 }
 
 #[test]

@@ -32,7 +32,7 @@ name = "bricks"
 albedo = "builtin:bricks"
 height = "builtin:bricks"
 base_color = [1.0, 1.0, 1.0]
-technique = "pom"
+technique = "exact"
 depth_scale = 0.06
 min_samples = 8
 max_samples = 32
@@ -380,7 +380,7 @@ impl SceneDoc {
                 self.set_material_field(k, None);
             }
             // Without a height map only flat and normal mapping make sense.
-            let t = self.material_field("technique").and_then(Value::as_str).unwrap_or("pom");
+            let t = self.material_field("technique").and_then(Value::as_str).unwrap_or("exact");
             if !matches!(t, "flat" | "normal") {
                 self.set_material_field("technique", Some(Value::String("normal".into())));
             }
@@ -535,12 +535,12 @@ mod tests {
         let file = write_sample(dir.path(), &SampleOptions::default()).unwrap();
         let mut doc = SceneDoc::open(&file).expect("the sample opens");
         assert_eq!(doc.material_names(), ["Bricks"]);
-        assert_eq!(doc.material_field("technique").and_then(Value::as_str), Some("pom"));
+        assert_eq!(doc.material_field("technique").and_then(Value::as_str), Some("exact"));
         let depth = doc.material_field("depth_scale").and_then(Value::as_float).unwrap();
         assert!((depth - 0.05).abs() < 1e-6, "{depth}");
         let scene = doc.build(&mut SceneCache::default()).unwrap();
         assert_eq!(scene.objects.len(), 1);
-        assert_eq!(scene.materials[0].technique, Technique::Pom);
+        assert_eq!(scene.materials[0].technique, Technique::Exact);
         // The panel's edits reach the file's material, and the doc survives its TOML round trip.
         doc.set_material_field("technique", Some(Value::String("relief".into())));
         let again = SceneDoc::from_text(&doc.to_toml(), Path::new("/elsewhere")).expect("round trip");

@@ -50,7 +50,7 @@
 //!                                   # bakes one from the height map
 //! normal_y_down = false             # the normal map is DirectX-style (+Y down)
 //! base_color = [0.8, 0.8, 0.8]      # multiplies the albedo
-//! technique = "pom"                 # flat, normal, parallax, iterative, steep, pom-classic,
+//! technique = "exact"               # flat, normal, parallax, iterative, steep, pom-classic,
 //!                                   # pom, relief, exact or cone
 //! depth_scale = 0.1                 # depth of the deepest point, in UV units; > 0, <= 16
 //! min_samples = 8                   # pom: fewest samples (head-on)
