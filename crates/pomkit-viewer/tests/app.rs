@@ -109,9 +109,10 @@ fn renders_on_the_gpu_thread_and_names_the_device() {
     assert_eq!(h.state().error(), None);
     let stats = h.state().stats().to_vec();
     assert_eq!(stats.len(), 1);
-    assert_eq!(stats[0].label, "pom");
+    // The default scene's technique is the default one, exact.
+    assert_eq!(stats[0].label, "exact");
     assert!(stats[0].covered > 10_000, "the plane covers the view: {stats:?}");
-    assert!(stats[0].fetches_per_pixel > 4.0, "pom with soft shadows fetches: {stats:?}");
+    assert!(stats[0].fetches_per_pixel > 4.0, "exact with soft shadows fetches: {stats:?}");
     assert!(stats[0].frame_ms > 0.0);
     let Some(Ok((name, software))) = h.state().device().cloned() else { panic!("a device") };
     assert!(h.query_by_label_contains(&format!("GPU: {name}")).is_some(), "the panel names the adapter");
@@ -208,7 +209,7 @@ fn split_view_renders_both_techniques_and_export_writes_png_and_scene() {
     h.step();
     settle(&mut h);
     let stats = h.state().stats().to_vec();
-    assert_eq!(stats.iter().map(|s| s.label.as_str()).collect::<Vec<_>>(), ["pom", "relief"]);
+    assert_eq!(stats.iter().map(|s| s.label.as_str()).collect::<Vec<_>>(), ["exact", "relief"]);
     assert_ne!(stats[0].fetches_per_pixel, stats[1].fetches_per_pixel, "two different traces: {stats:?}");
 
     let png = dir.path().join("view.png");

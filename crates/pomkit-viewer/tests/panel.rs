@@ -65,7 +65,7 @@ fn string(s: &str) -> Value {
 #[test]
 fn choosing_a_technique_writes_it_and_the_scene_uses_it() {
     let mut harness = panel(&TECHNIQUE_PARAMS, SceneDoc::default());
-    assert_eq!(control(&harness, "Technique").value().as_deref(), Some("pom"));
+    assert_eq!(control(&harness, "Technique").value().as_deref(), Some("exact"));
 
     control(&harness, "Technique").click();
     harness.run();
@@ -124,11 +124,11 @@ fn choosing_the_current_technique_writes_nothing() {
     let mut doc = SceneDoc::default();
     doc.set_material_field("technique", None);
     let mut harness = panel(&TECHNIQUE_PARAMS, doc.clone());
-    assert_eq!(control(&harness, "Technique").value().as_deref(), Some("pom"), "the default is shown");
+    assert_eq!(control(&harness, "Technique").value().as_deref(), Some("exact"), "the default is shown");
 
     control(&harness, "Technique").click();
     harness.run();
-    harness.get_by_label("pom").click();
+    harness.get_by_label("exact").click();
     harness.run();
 
     assert_eq!(harness.state().material_field("technique"), None);
@@ -151,8 +151,10 @@ fn untouched_controls_write_nothing() {
 
 #[test]
 fn controls_that_do_not_apply_are_disabled() {
-    // The default scene: pom with soft shadows, which also use the pom sample bounds.
-    let mut harness = panel(&TECHNIQUE_PARAMS, SceneDoc::default());
+    // The default scene set to pom, with its soft shadows, which also use the pom sample bounds.
+    let mut doc = SceneDoc::default();
+    doc.set_material_field("technique", Some(string("pom")));
+    let mut harness = panel(&TECHNIQUE_PARAMS, doc);
     for label in ["Binary steps", "Iterations", "Samples", "Perspective bias"] {
         assert!(disabled(&control(&harness, label)), "{label} is disabled under pom");
         assert!(disabled(&label_node(&harness, label)), "{label}'s label is greyed out too");
