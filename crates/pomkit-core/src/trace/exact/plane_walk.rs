@@ -202,7 +202,6 @@ fn forget(seen: u64, left: usize) -> u64 {
 /// size) are walls of every level (32 stands for them). The crossed walls are those whose
 /// crossing time, computed as [`exit_time`] computes it, is `t_exit` (the GPU's
 /// `pomkit_levels_left`).
-#[expect(clippy::too_many_arguments, reason = "the cell, the ray, its exit and the field's size")]
 fn levels_left(cell: &Cell, level: usize, o: DVec3, d: DVec3, t_exit: f64, w: i64, h: i64) -> usize {
     let size = 1i64 << level.min(62);
     let axis = |index: u32, lo: f64, hi: f64, p0: f64, dp: f64, n: i64| -> usize {
