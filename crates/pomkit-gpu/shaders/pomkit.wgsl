@@ -599,6 +599,19 @@ fn pomkit_leaf_hit(heights: texture_2d<f32>, samp: sampler, map: PomkitMap, stat
     return -1.0;
 }
 
+/// The first of a leaf's patch ends (`pomkit_leaf_ends`) past `t`: the end of the segment the
+/// walk solves next, in the order `pomkit_leaf_hit` solves them.
+fn pomkit_next_end(leaf: vec3<f32>, t: f32) -> f32 {
+    var end = leaf.z;
+    if leaf.y > t {
+        end = leaf.y;
+    }
+    if leaf.x > t {
+        end = leaf.x;
+    }
+    return end;
+}
+
 /// The level the walk starts at (trace.rs `start_level`): `floor(log2(travel)) - 3` for a
 /// horizontal travel of at least 8 texels, else 0, and never above `top`. From the f32 travel,
 /// so it can differ from the CPU's only for a travel within rounding of a power of two (the
@@ -706,14 +719,7 @@ fn pomkit_exact_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, sa
             leaf_left = left;
             in_leaf = true;
         }
-        // The first end past t: the segments `pomkit_leaf_hit` solves, in order.
-        var end = leaf.z;
-        if leaf.y > t {
-            end = leaf.y;
-        }
-        if leaf.x > t {
-            end = leaf.x;
-        }
+        let end = pomkit_next_end(leaf, t);
         let h = pomkit_patch_hit(heights, samp, map, &state, o, d, t, end);
         if h >= 0.0 {
             return PomkitWalk(h, state.fetches);
@@ -919,13 +925,7 @@ fn pomkit_planes_first_hit(heights: texture_2d<f32>, pyramid: texture_2d<f32>, p
                 in_leaf = true;
             }
         }
-        var end = leaf.z;
-        if leaf.y > t {
-            end = leaf.y;
-        }
-        if leaf.x > t {
-            end = leaf.x;
-        }
+        let end = pomkit_next_end(leaf, t);
         let h = pomkit_patch_hit(heights, samp, map, &state, o, d, t, end);
         if h >= 0.0 {
             return PomkitWalk(h, state.fetches);
