@@ -30,31 +30,65 @@ impl PlaneBounds {
     /// [`GpuError::Unsupported`] if `surface` has no plane bounds; [`GpuError::TooLarge`] if the
     /// texture exceeds the device's `max_texture_dimension_2d`.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, surface: &Surface, label: &str) -> Result<Self, GpuError> {
+        let f = surface.field();
+        Self::from_texels(device, queue, (f.width(), f.height()), &Self::texels(surface, label)?, label)
+    }
+
+    /// The texels of [`PlaneBounds::new`] for `surface`, level by level from level 1
+    /// ([`crate::library::plane_texels`]), to upload with [`PlaneBounds::from_texels`] (a
+    /// renderer can keep them for the next material on the same heights).
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] if `surface` has no plane bounds.
+    pub fn texels(surface: &Surface, label: &str) -> Result<Vec<Vec<[u32; 4]>>, GpuError> {
         let Some(planes) = surface.plane_bounds() else {
             return Err(GpuError::Unsupported(format!(
                 "plane bounds of \"{label}\": the surface has none (call Surface::use_plane_bounds first)"
             )));
         };
         let pyramid = surface.pyramid();
-        let (w, h) = (surface.field().width(), surface.field().height());
+        Ok((1..pyramid.len()).map(|level| crate::library::plane_texels(planes, pyramid, level)).collect())
+    }
+
+    /// Uploads `levels` ([`PlaneBounds::texels`]) of a `width` x `height` height map.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] if `levels` are not those of a map of that size;
+    /// [`GpuError::TooLarge`] if the texture exceeds the device's `max_texture_dimension_2d`.
+    pub fn from_texels(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        (w, h): (u32, u32),
+        levels: &[Vec<[u32; 4]>],
+        label: &str,
+    ) -> Result<Self, GpuError> {
         let (width, height) = ((w.next_power_of_two() / 2).max(1), (h.next_power_of_two() / 2).max(1));
         let limit = device.limits().max_texture_dimension_2d;
         if width > limit || height > limit {
             return Err(GpuError::TooLarge { what: format!("plane bounds of \"{label}\""), width, height, limit });
         }
-        let mips = u32::try_from(pyramid.len().saturating_sub(1)).unwrap_or(u32::MAX).max(1);
-        let bounds = Self::allocate(device, width, height, mips, label);
-        for level in 1..pyramid.len() {
-            let (cw, ch) = pyramid.level_size(level);
-            let bytes: Vec<u8> = crate::library::plane_texels(planes, pyramid, level)
-                .iter()
-                .flatten()
-                .flat_map(|v| v.to_le_bytes())
-                .collect();
+        // The pyramid's levels above 0: the sides halved rounding up, `level` times.
+        let size = |level: u32| (w.div_ceil(1 << level.min(31)), h.div_ceil(1 << level.min(31)));
+        let expected = 32 - w.max(h).max(1).next_power_of_two().leading_zeros() - 1;
+        let fits = levels.len() == expected as usize
+            && levels.iter().enumerate().all(|(k, l)| {
+                let (cw, ch) = size(k as u32 + 1);
+                l.len() == cw as usize * ch as usize
+            });
+        if !fits {
+            return Err(GpuError::Unsupported(format!(
+                "plane bounds of \"{label}\": {} levels that are not those of a {w}x{h} height map",
+                levels.len()
+            )));
+        }
+        let bounds = Self::allocate(device, width, height, expected.max(1), label);
+        for (k, texels) in levels.iter().enumerate() {
+            let (cw, ch) = size(k as u32 + 1);
+            let bytes: Vec<u8> = texels.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
             queue.write_texture(
                 wgpu::TexelCopyTextureInfo {
                     texture: &bounds.texture,
-                    mip_level: u32::try_from(level - 1).unwrap_or(0),
+                    mip_level: k as u32,
                     origin: wgpu::Origin3d::ZERO,
                     aspect: wgpu::TextureAspect::All,
                 },

@@ -95,6 +95,12 @@ impl Surface {
     /// hits are the same either way (docs/ACCURACY.md, "Affine bounds per cell"). Returns
     /// whether it kept them. Costs the bounds' build and 128 traces.
     pub fn choose_plane_bounds(&mut self) -> bool {
+        let planes = CellPlanes::new(self.field(), self.pyramid(), self.edges);
+        self.choose_with(std::sync::Arc::new(planes))
+    }
+
+    /// [`Surface::choose_plane_bounds`] with `planes`, this field's bounds, built already.
+    fn choose_with(&mut self, planes: std::sync::Arc<CellPlanes>) -> bool {
         self.planes = None;
         let params = TraceParams::default();
         let rays: Vec<Ray> = (0..PLANE_CHOICE_RAYS)
@@ -109,7 +115,7 @@ impl Surface {
             rays.iter().map(|r| u64::from(trace(s, r, Technique::Exact, &params).fetches)).sum()
         };
         let without = fetches(self);
-        self.use_plane_bounds();
+        self.planes = Some(planes);
         let with = fetches(self);
         if with >= without {
             self.planes = None;
@@ -222,9 +228,10 @@ impl Surface {
 }
 
 /// The plane bounds `exact`'s view rays on `field` walk on, if they pay there
-/// ([`Surface::choose_plane_bounds`], at `depth_scale` with `edges`): chosen once per height
-/// field and shared while the field lives, as [`crate::cone::cached`] shares cones, so renderers
-/// that prepare their surfaces every frame choose once. Entries of fields that were dropped are
+/// ([`Surface::choose_plane_bounds`], at `depth_scale` with `edges`). Shared while the field
+/// lives, as [`crate::cone::cached`] shares cones, so renderers that prepare their surfaces every
+/// frame build the bounds once per height field and edge mode (they do not depend on the depth
+/// scale) and choose once per depth scale (128 traces). Entries of fields that were dropped are
 /// forgotten.
 #[must_use]
 pub fn cached_plane_bounds(
@@ -233,29 +240,40 @@ pub fn cached_plane_bounds(
     depth_scale: f32,
 ) -> Option<std::sync::Arc<CellPlanes>> {
     use std::sync::{Arc, Mutex, Weak};
-    type Entry = (Weak<HeightField>, EdgeMode, u32, Option<Arc<CellPlanes>>);
+    /// A field's bounds, and the choice made at each depth scale (its bits) so far.
+    type Entry = (Weak<HeightField>, EdgeMode, Arc<CellPlanes>, Vec<(u32, bool)>);
     static CACHE: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
     let depth_scale = sanitized_depth_scale(depth_scale);
     let key = depth_scale.to_bits();
+    let lock = || CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    // The entry's bounds and its choice at this depth scale, where known.
     let find = |cache: &mut Vec<Entry>| {
         cache.retain(|(f, ..)| f.strong_count() > 0);
         cache
             .iter()
-            .find(|(f, e, k, _)| *e == edges && *k == key && f.as_ptr() == Arc::as_ptr(field))
-            .map(|(.., p)| p.clone())
+            .find(|(f, e, ..)| *e == edges && f.as_ptr() == Arc::as_ptr(field))
+            .map(|(_, _, p, chosen)| (Arc::clone(p), chosen.iter().find(|(k, _)| *k == key).map(|&(_, pays)| pays)))
     };
     // A poisoned lock only means another thread panicked while holding it; the list stays valid.
-    if let Some(p) = find(&mut CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner)) {
-        return p;
+    let known = find(&mut lock());
+    if let Some((planes, Some(pays))) = &known {
+        return pays.then(|| Arc::clone(planes));
     }
-    // Chosen outside the lock: two threads may both choose, never wait on each other.
+    // Built and chosen outside the lock: two threads may both do it, never wait on each other.
     let mut surface = Surface::new((**field).clone(), edges, depth_scale);
-    surface.choose_plane_bounds();
-    let planes = surface.planes.clone();
-    let mut cache = CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    if let Some(p) = find(&mut cache) {
-        return p;
+    let planes = match known {
+        Some((planes, None)) => planes,
+        _ => Arc::new(CellPlanes::new(surface.field(), surface.pyramid(), edges)),
+    };
+    let pays = surface.choose_with(Arc::clone(&planes));
+    let mut cache = lock();
+    match cache.iter_mut().find(|(f, e, ..)| *e == edges && f.as_ptr() == Arc::as_ptr(field)) {
+        Some((.., chosen)) => {
+            if !chosen.iter().any(|(k, _)| *k == key) {
+                chosen.push((key, pays));
+            }
+        }
+        None => cache.push((Arc::downgrade(field), edges, Arc::clone(&planes), vec![(key, pays)])),
     }
-    cache.push((Arc::downgrade(field), edges, key, planes.clone()));
-    planes
+    pays.then_some(planes)
 }

@@ -457,19 +457,42 @@ fn plane_bounds_offset() -> u64 {
 
 /// The plane bounds `exact` walks on for `field`, if they read fewer fetches there
 /// ([`pomkit_core::trace::cached_plane_bounds`], the choice the CPU renderer makes): built for
-/// the f16-rounded depths the GPU samples, and uploaded.
+/// the f16-rounded depths the GPU samples, once per height field and edge mode while the field
+/// lives (a viewer makes a new material at every edit), and uploaded.
 fn plane_bounds(
     ctx: &GpuContext,
     field: &Arc<HeightField>,
     material: &Material,
     depth_scale: f32,
 ) -> Result<Option<PlaneBounds>, GpuError> {
-    if pomkit_core::trace::cached_plane_bounds(field, material.edges, depth_scale).is_none() {
+    use std::sync::{Mutex, Weak};
+    type Entry = (Weak<HeightField>, pomkit_core::EdgeMode, Arc<Vec<Vec<[u32; 4]>>>);
+    static CACHE: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
+    let edges = material.edges;
+    if pomkit_core::trace::cached_plane_bounds(field, edges, depth_scale).is_none() {
         return Ok(None);
     }
-    let mut surface = pomkit_core::trace::Surface::new(crate::height::f16_surface(field), material.edges, depth_scale);
-    surface.use_plane_bounds();
-    PlaneBounds::new(&ctx.device, &ctx.queue, &surface, &material.name).map(Some)
+    let lock = || CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let find = |cache: &mut Vec<Entry>| {
+        cache.retain(|(f, ..)| f.strong_count() > 0);
+        cache.iter().find(|(f, e, _)| *e == edges && f.as_ptr() == Arc::as_ptr(field)).map(|(.., t)| Arc::clone(t))
+    };
+    // (Its own statement: the guard of a `match` scrutinee would live through the arms, where
+    // `lock` is taken again.)
+    let found = find(&mut lock());
+    let texels = match found {
+        Some(t) => t,
+        None => {
+            // Built outside the lock: two threads may both build them, never wait on each other.
+            let mut surface = pomkit_core::trace::Surface::new(crate::height::f16_surface(field), edges, depth_scale);
+            surface.use_plane_bounds();
+            let t = Arc::new(PlaneBounds::texels(&surface, &material.name)?);
+            lock().push((Arc::downgrade(field), edges, Arc::clone(&t)));
+            t
+        }
+    };
+    PlaneBounds::from_texels(&ctx.device, &ctx.queue, (field.width(), field.height()), &texels, &material.name)
+        .map(Some)
 }
 
 /// Each member's name and byte offset in `render.wgsl`'s `Material` uniform as pomkit writes

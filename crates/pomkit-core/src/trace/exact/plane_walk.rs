@@ -309,9 +309,11 @@ mod choice {
             let field = Arc::new(s.field().clone());
             let cached = cached_plane_bounds(&field, EdgeMode::Wrap, 0.1);
             assert_eq!(cached.is_some(), pays, "{}", pattern.name());
-            // The same field again: the same bounds, not built anew.
+            // The same field again, at this depth scale or another: the same bounds, not built
+            // anew.
             if let Some(p) = cached {
                 assert!(Arc::ptr_eq(&p, &cached_plane_bounds(&field, EdgeMode::Wrap, 0.1).expect("cached")));
+                assert!(Arc::ptr_eq(&p, &cached_plane_bounds(&field, EdgeMode::Wrap, 0.12).expect("still pays")));
             }
         }
     }
